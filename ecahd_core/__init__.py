@@ -1,0 +1,15 @@
+"""ecahd_core: the ECAHD algorithms as a plain torch/numpy library (no rclpy).
+
+Modules, by question:
+- ``errors``      what went wrong (one exception family for bad input)
+- ``maps``        occupancy grids: D4RL mazes, Nav2 map_server YAML, OccupancyGrid layout
+- ``costmap``     the differentiable collision cost map read by bilinear interpolation (Eqs. 10-13)
+- ``footprint``   robot shapes and their interior sample points R (Sec. III-B)
+- ``cost``        the cost function J of Algorithm 2 (lines 11-25), batched
+- ``collision``   the exact (non-differentiable) swept-footprint collision checker for evaluation
+- ``astar``       A* with footprint clearance, the expert and the classical baseline
+- ``dataset``     expert data for the SD / DD / FD models (Sec. IV-A)
+- ``bench``       benchmark commands
+"""
+
+__version__ = "0.1.0"
