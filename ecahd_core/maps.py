@@ -383,3 +383,23 @@ def from_occupancy_grid(data, width: int, height: int, resolution: float,
                    origin=tuple(origin_xy), name=name, frame_id=frame_id,
                    unknown_is_occupied=unknown_is_occupied,
                    occupied_threshold=occupied_threshold)
+
+
+# ------------------------------------------------------------------------ distance fields
+def signed_distance(grid: GridMap) -> np.ndarray:
+    """Signed distance [m] from each cell centre to the nearest obstacle boundary.
+
+    Returns (H, W) float64: positive in free space (distance to the closest obstacle edge),
+    negative inside obstacles (depth below the closest free edge). Everything off the map counts
+    as obstacle, so free cells at the map edge see the edge as a wall. Exact up to the
+    half-cell discretisation of cv2.distanceTransform (DIST_L2, precise mask).
+    """
+    import cv2
+
+    occ = np.pad(grid.occupied, 1, constant_values=True)
+    free_u8 = (~occ).astype(np.uint8)
+    d_out = cv2.distanceTransform(free_u8, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)  # to nearest obstacle centre
+    d_in = cv2.distanceTransform(1 - free_u8, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)  # to nearest free centre
+    half = 0.5
+    sdf = np.where(occ, -(d_in - half), d_out - half)[1:-1, 1:-1]
+    return sdf.astype(np.float64) * grid.resolution
