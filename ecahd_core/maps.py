@@ -314,7 +314,9 @@ def load_nav2_yaml(path: str | os.PathLike, *, unknown_is_occupied: bool = True)
 
 
 def save_nav2_yaml(grid: GridMap, path: str | os.PathLike, image_format: str = "pgm") -> Path:
-    """Save as map_saver does (trinary: free 254, occupied 0, unknown 205; thresholds 0.65 / 0.25).
+    """Save as map_saver does in trinary mode: free 254, occupied 0, unknown 205, with the fixed
+    thresholds occupied 0.65 / free 0.196 that ROS 1 and Nav2 (since navigation2 PR 5278) write,
+    so that the grey 205 pixel ((255-205)/255 = 0.1961) reloads as unknown, not free.
 
     Returns the YAML path; the image is written beside it with the same stem.
     """
@@ -338,7 +340,7 @@ def save_nav2_yaml(grid: GridMap, path: str | os.PathLike, image_format: str = "
         "origin": [grid.origin[0], grid.origin[1], 0.0],
         "negate": 0,
         "occupied_thresh": 0.65,
-        "free_thresh": 0.25,
+        "free_thresh": 0.196,
     }
     path.write_text(yaml.safe_dump(meta, sort_keys=False))
     return path
