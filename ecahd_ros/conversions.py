@@ -1,0 +1,76 @@
+"""Message conversion between ROS 2 messages and ecahd_core types (the only place that knows both)."""
+from __future__ import annotations
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Pose, PoseStamped
+from nav_msgs.msg import OccupancyGrid, Path
+
+from ecahd_core.errors import MapError
+from ecahd_core.maps import GridMap, from_occupancy_grid, to_occupancy_grid
+
+
+def grid_to_msg(grid: GridMap, stamp: Time | None = None) -> OccupancyGrid:
+    """GridMap -> nav_msgs/OccupancyGrid (row-major from the origin, -1 unknown, 0..100)."""
+    layout = to_occupancy_grid(grid)
+    msg = OccupancyGrid()
+    msg.header.frame_id = layout.frame_id
+    if stamp is not None:
+        msg.header.stamp = stamp
+        msg.info.map_load_time = stamp
+    msg.info.resolution = float(layout.resolution)
+    msg.info.width = layout.width
+    msg.info.height = layout.height
+    msg.info.origin.position.x = float(layout.origin_xy[0])
+    msg.info.origin.position.y = float(layout.origin_xy[1])
+    msg.info.origin.orientation.w = 1.0
+    msg.data = layout.data.astype(np.int8).tolist()
+    return msg
+
+
+def msg_to_grid(msg: OccupancyGrid, *, unknown_is_occupied: bool = True,
+                name: str = "occupancy_grid") -> GridMap:
+    """nav_msgs/OccupancyGrid -> GridMap; raises MapError for a malformed or rotated grid."""
+    q = msg.info.origin.orientation
+    if abs(q.x) > 1e-6 or abs(q.y) > 1e-6 or abs(q.z) > 1e-6:
+        raise MapError("OccupancyGrid with a rotated origin is not supported")
+    return from_occupancy_grid(np.asarray(msg.data, dtype=np.int16), msg.info.width,
+                               msg.info.height, msg.info.resolution,
+                               (msg.info.origin.position.x, msg.info.origin.position.y),
+                               frame_id=msg.header.frame_id or "map", name=name,
+                               unknown_is_occupied=unknown_is_occupied)
+
+
+def xy_to_path(xy: np.ndarray, frame_id: str, stamp: Time | None = None) -> Path:
+    """(N, 2) positions [m] -> nav_msgs/Path, each pose facing the next point."""
+    xy = np.asarray(xy, dtype=np.float64)
+    path = Path()
+    path.header.frame_id = frame_id
+    if stamp is not None:
+        path.header.stamp = stamp
+    d = np.diff(xy, axis=0, append=xy[-1:] if len(xy) < 2 else xy[-1:] + (xy[-1:] - xy[-2:-1]))
+    yaw = np.arctan2(d[:, 1], d[:, 0])
+    for (x, y), a in zip(xy, yaw):
+        ps = PoseStamped()
+        ps.header = path.header
+        ps.pose = pose_from_xy_yaw(float(x), float(y), float(a))
+        path.poses.append(ps)
+    return path
+
+
+def path_to_xy(path: Path) -> np.ndarray:
+    """nav_msgs/Path -> (N, 2) positions [m]."""
+    return np.array([[p.pose.position.x, p.pose.position.y] for p in path.poses],
+                    dtype=np.float64).reshape(-1, 2)
+
+
+def pose_from_xy_yaw(x: float, y: float, yaw: float) -> Pose:
+    pose = Pose()
+    pose.position.x, pose.position.y = x, y
+    pose.orientation.z, pose.orientation.w = float(np.sin(yaw / 2)), float(np.cos(yaw / 2))
+    return pose
+
+
+def yaw_from_quaternion(q) -> float:
+    """Heading [rad] of a geometry_msgs/Quaternion (rotation about z)."""
+    return float(np.arctan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z)))

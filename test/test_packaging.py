@@ -1,0 +1,57 @@
+"""Packaging: colcon builds a runnable ament_python package; ecahd_core never imports rclpy."""
+import ast
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+EXECUTABLES = ["ecahd", "map_publisher"]
+
+
+def test_core_never_imports_rclpy_statically():
+    offenders = []
+    for path in (ROOT / "ecahd_core").rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = []
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.module:
+                names = [node.module]
+            offenders += [f"{path.relative_to(ROOT)}: {n}" for n in names
+                          if n.split(".")[0] in ("rclpy", "ecahd_ros", "sim_bridge")]
+    assert not offenders, offenders
+
+
+def test_core_import_does_not_load_rclpy():
+    modules = sorted(p.stem for p in (ROOT / "ecahd_core").glob("*.py") if p.stem != "__init__")
+    code = ("import importlib, sys\n"
+            f"for m in {modules!r}: importlib.import_module('ecahd_core.' + m)\n"
+            "assert 'rclpy' not in sys.modules, 'rclpy was imported'\n")
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT)
+
+
+@pytest.mark.skipif(shutil.which("colcon") is None, reason="colcon is not installed")
+def test_colcon_build_installs_ros2_run_layout(tmp_path):
+    src = tmp_path / "src" / "ecahd_ros"
+    shutil.copytree(ROOT, src, ignore=shutil.ignore_patterns(
+        ".venv", ".git", "build", "install", "log", "runs", "__pycache__", "*.egg-info"))
+    result = subprocess.run(["colcon", "build", "--base-paths", "src"], cwd=tmp_path,
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stdout + result.stderr
+    install = tmp_path / "install"
+    lib = install / "ecahd_ros" / "lib" / "ecahd_ros"
+    for exe in EXECUTABLES:  # where `ros2 run ecahd_ros <exe>` looks
+        assert os.access(lib / exe, os.X_OK), f"{exe} missing from {lib}"
+    share = install / "ecahd_ros" / "share"
+    assert (share / "ecahd_ros" / "package.xml").is_file()
+    assert (share / "ament_index" / "resource_index" / "packages" / "ecahd_ros").is_file()
+    site = next((install / "ecahd_ros" / "lib").glob("python3*/site-packages"))
+    env = dict(os.environ, PYTHONPATH=str(site))
+    out = subprocess.run([str(lib / "ecahd"), "--help"], cwd=tmp_path, env=env,
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert "dataset" in out.stdout and "bench" in out.stdout
