@@ -1,10 +1,12 @@
 """The ``ecahd`` command: one tool, several subcommands.
 
     ecahd plan      plan one path on a map and draw it
+    ecahd map       describe a map, export it as Nav2 YAML + PGM, draw it
     ecahd dataset   generate A* expert data for training
     ecahd bench     benchmarks (cost, ...)
 
-Subcommand modules are imported lazily, so ``ecahd bench cost`` never loads rclpy.
+Subcommand modules keep their heavy imports (torch, rclpy) inside ``run``, so building the parser
+is fast and ``ecahd bench cost`` never loads rclpy.
 """
 from __future__ import annotations
 
@@ -18,6 +20,7 @@ from ecahd_core.errors import EcahdError
 # name -> (module, one-line help). Each module defines add_arguments(parser) and run(args).
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "plan": ("ecahd_core.commands.plan", "plan one path on a map and write a PNG / JSON"),
+    "map": ("ecahd_core.commands.map", "describe / export a map (Nav2 YAML + PGM, PNG)"),
     "dataset": ("ecahd_core.commands.dataset", "generate A* expert data (.npz) for training"),
     "bench": ("ecahd_core.commands.bench", "run a benchmark and print ratios against a reference"),
 }
