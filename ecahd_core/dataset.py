@@ -1,0 +1,473 @@
+"""Expert data for the Sparse (SD), Dense (DD) and Full-sequence (FD) diffusion models
+(paper Sec. IV-A: "A* trajectories between random point pairs, sampled into 10 sparse waypoints
+for SD and 2 dense local points between each pair for DD").
+
+One expert path = the smoothed A* path (``astar.py``) between a random start S and goal G in the
+clearance-free space, kept if its length is >= ``min_distance``. Each path is resampled by arc
+length into
+
+- ``sparse``      (N, P^g, 2): P^g = 10 waypoints, S first and G last (SD training);
+- ``sparse_h{h}`` (N, h, 2) for h = 2..P^g: what Algorithm 1 asks SD for after the robot has
+  advanced P^g - h waypoints, i.e. the rest of the path from sparse waypoint P^g - h to G in
+  h points;
+- ``dense``       (N * (P^g - 1), P^l, 2): the path between sparse waypoints k and k + 1 in
+  P^l = 4 points (2 interior points), row i * (P^g - 1) + k for pair i (DD training);
+- ``full``        (N, 100, 2): the whole path in 100 points (the FD / Diffuser baseline).
+
+Because the sparse waypoints are evenly spaced by arc length, ``sparse_h{h}`` equals
+``sparse[:, P^g - h:]``; it is stored so that training code reads each horizon by name.
+
+Files are versioned ``.npz`` archives (``DATASET_VERSION``) that also hold the map and every
+generation parameter; they are written byte-for-byte reproducibly, so the same map, seed and
+parameters give the same :func:`file_sha256` (recorded in checkpoints).
+
+Units: metres in the map frame; trajectories are float32.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import math
+import os
+import pickle
+import time
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ecahd_core.astar import (SDF_TOLERANCE, AStarPlanner, clearance_for_footprint, path_length,
+                              sample_free_point)
+from ecahd_core.errors import DatasetError, PlanningError, TrajectoryError
+from ecahd_core.footprint import make_footprint
+from ecahd_core.maps import GridMap
+
+log = logging.getLogger(__name__)
+
+DATASET_VERSION = 1
+DATASET_KIND = "ecahd-expert-dataset"
+DTYPE = np.float32  # trajectories, starts, goals, lengths
+_ENDPOINT_TRIES = 100  # jittered draws per start / goal before falling back to a cell centre
+_ZIP_DATE = (1980, 1, 1, 0, 0, 0)  # fixed member timestamps: reproducible files
+
+
+# ------------------------------------------------------------------------------ resampling
+def cumulative_arclength(path) -> np.ndarray:
+    """(N, 2) path [m] -> (N,) arc length [m] at each vertex, starting at 0."""
+    pts = _as_path(path)
+    seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    return np.concatenate([[0.0], np.cumsum(seg)])
+
+
+def points_at_arclength(path, s) -> np.ndarray:
+    """Points of a polyline at arc lengths ``s`` [m] from its start (clamped to [0, length]).
+
+    path: (N, 2) [m], s: (M,) [m] -> (M, 2) float64 [m]. A zero-length path gives copies of its
+    first point.
+    """
+    pts = _as_path(path)
+    cum = cumulative_arclength(pts)
+    s = np.asarray(s, dtype=np.float64)
+    if cum[-1] <= 0.0:
+        return np.repeat(pts[:1], len(s), axis=0)
+    step = np.concatenate([[True], np.diff(cum) > 0])  # drop repeated vertices: interp needs increasing x
+    cum, pts = cum[step], pts[step]
+    return np.stack([np.interp(s, cum, pts[:, 0]), np.interp(s, cum, pts[:, 1])], axis=1)
+
+
+def resample_by_arclength(path, n: int) -> np.ndarray:
+    """``n`` points evenly spaced by arc length along a polyline.
+
+    path: (N, 2) [m] -> (n, 2) float64 [m], n >= 2; the first and last points are exactly the
+    path's end points. A zero-length path gives n copies of its point.
+    """
+    if int(n) != n or n < 2:
+        raise TrajectoryError(f"resampling needs n >= 2 points, got {n!r}")
+    pts = _as_path(path)
+    total = cumulative_arclength(pts)[-1]
+    out = points_at_arclength(pts, np.linspace(0.0, total, int(n)))
+    out[0], out[-1] = pts[0], pts[-1]
+    return out
+
+
+def _as_path(path) -> np.ndarray:
+    pts = np.asarray(path, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 1:
+        raise TrajectoryError(f"a path must have shape (N, 2) with N >= 1, got {pts.shape}")
+    if not np.all(np.isfinite(pts)):
+        raise TrajectoryError("path has NaN or inf coordinates")
+    return pts
+
+
+# -------------------------------------------------------------------------- one expert path
+@dataclass(frozen=True)
+class ExpertSample:
+    """The training views of one expert path (float64, metres).
+
+    Attributes:
+        sparse: (P^g, 2) waypoints evenly spaced by arc length, start first, goal last.
+        sparse_h: {h: (h, 2)} for h = 2..P^g, the path from sparse waypoint P^g - h to the goal.
+        dense: (P^g - 1, P^l, 2), segment k runs from sparse[k] to sparse[k + 1].
+        full: (F, 2) the whole path.
+        length: path length [m].
+    """
+
+    sparse: np.ndarray
+    sparse_h: dict[int, np.ndarray]
+    dense: np.ndarray
+    full: np.ndarray
+    length: float
+
+
+def expert_sample(path, *, sparse_horizon: int = 10, dense_points: int = 4,
+                  full_points: int = 100) -> ExpertSample:
+    """Resample one (N, 2) expert path [m] into its sparse, shorter-horizon, dense and full views."""
+    pts = _as_path(path)
+    Pg, Pl = sparse_horizon, dense_points
+    total = float(cumulative_arclength(pts)[-1])
+    s = np.linspace(0.0, total, Pg)  # arc length of the sparse waypoints [m]
+    sparse = resample_by_arclength(pts, Pg)  # (Pg, 2)
+
+    sparse_h = {}
+    for h in range(2, Pg + 1):
+        k = Pg - h  # waypoints already reached
+        rest = points_at_arclength(pts, np.linspace(s[k], total, h))  # (h, 2)
+        rest[0], rest[-1] = sparse[k], sparse[-1]
+        sparse_h[h] = rest
+
+    dense = np.stack([points_at_arclength(pts, np.linspace(s[k], s[k + 1], Pl))
+                      for k in range(Pg - 1)])  # (Pg - 1, Pl, 2)
+    dense[:, 0], dense[:, -1] = sparse[:-1], sparse[1:]
+
+    full = resample_by_arclength(pts, full_points)  # (F, 2)
+    return ExpertSample(sparse=sparse, sparse_h=sparse_h, dense=dense, full=full, length=total)
+
+
+# --------------------------------------------------------------------------------- dataset
+@dataclass(eq=False)
+class ExpertDataset:
+    """A set of N expert paths in all training views, with the map and parameters that made it.
+
+    Attributes:
+        sparse: (N, P^g, 2) float32 [m].
+        sparse_h: {h: (N, h, 2)} float32 [m] for h = 2..P^g.
+        dense: (N * (P^g - 1), P^l, 2) float32 [m]; row i * (P^g - 1) + k is pair i, segment k.
+        full: (N, F, 2) float32 [m].
+        starts, goals: (N, 2) float32 [m].
+        lengths: (N,) float32 path lengths [m].
+        map_data: (H, W) int8 occupancy (OccupancyGrid values, row 0 at the lowest y).
+        map_resolution: [m/cell].
+        map_origin: (x, y) [m] of the map's lower-left corner.
+        map_name, map_fingerprint: the map's identity (``GridMap.fingerprint``).
+        params: generation parameters (seed, footprint_spec, padding, clearance, min_distance,
+            horizons, attempts and rejections, map flags); JSON-serialisable.
+        sha256: the file's SHA-256 once saved or loaded, else None.
+    """
+
+    sparse: np.ndarray
+    sparse_h: dict[int, np.ndarray]
+    dense: np.ndarray
+    full: np.ndarray
+    starts: np.ndarray
+    goals: np.ndarray
+    lengths: np.ndarray
+    map_data: np.ndarray
+    map_resolution: float
+    map_origin: tuple[float, float]
+    map_name: str
+    map_fingerprint: str
+    params: dict = field(default_factory=dict)
+    sha256: str | None = None
+
+    @property
+    def num_pairs(self) -> int:
+        return int(self.sparse.shape[0])
+
+    @property
+    def sparse_horizon(self) -> int:
+        """P^g."""
+        return int(self.sparse.shape[1])
+
+    @property
+    def dense_points(self) -> int:
+        """P^l."""
+        return int(self.dense.shape[1])
+
+    def grid(self) -> GridMap:
+        """The map the paths were planned on."""
+        flags = self.params.get("map", {})
+        return GridMap(data=self.map_data, resolution=self.map_resolution,
+                       origin=tuple(self.map_origin), name=self.map_name,
+                       frame_id=flags.get("frame_id", "map"),
+                       unknown_is_occupied=flags.get("unknown_is_occupied", True),
+                       occupied_threshold=flags.get("occupied_threshold", 65))
+
+    # ----------------------------------------------------------------------------- files
+    def _arrays(self) -> dict[str, np.ndarray]:
+        params = dict(self.params, kind=DATASET_KIND, version=DATASET_VERSION)
+        arrays = {
+            "version": np.asarray(DATASET_VERSION, dtype=np.int64),
+            "params_json": np.asarray(json.dumps(params, sort_keys=True)),
+            "sparse": self.sparse,
+            **{f"sparse_h{h}": self.sparse_h[h] for h in sorted(self.sparse_h)},
+            "dense": self.dense,
+            "full": self.full,
+            "starts": self.starts,
+            "goals": self.goals,
+            "lengths": self.lengths,
+            "map_data": self.map_data,
+            "map_resolution": np.asarray(self.map_resolution, dtype=np.float64),
+            "map_origin": np.asarray(self.map_origin, dtype=np.float64),
+            "map_name": np.asarray(self.map_name),
+            "map_fingerprint": np.asarray(self.map_fingerprint),
+        }
+        return {k: np.asarray(v) for k, v in arrays.items()}
+
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write a compressed, versioned ``.npz`` at exactly ``path`` (atomically, by rename)
+        and set :attr:`sha256`. Returns the path."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(path.name + ".tmp")
+        with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+            for key, arr in self._arrays().items():
+                info = zipfile.ZipInfo(key + ".npy", date_time=_ZIP_DATE)
+                info.compress_type = zipfile.ZIP_DEFLATED
+                with zf.open(info, "w") as member:
+                    np.lib.format.write_array(member, arr, allow_pickle=False)
+        os.replace(tmp, path)
+        self.sha256 = file_sha256(path)
+        return path
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "ExpertDataset":
+        """Read a file written by :meth:`save`; raises DatasetError naming the problem (missing
+        file, not an .npz, not an expert dataset, another format version, inconsistent arrays)."""
+        path = Path(path)
+        if not path.is_file():
+            raise DatasetError(f"dataset file {str(path)!r} does not exist")
+        try:
+            npz = np.load(path, allow_pickle=False)
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile, pickle.UnpicklingError) as exc:
+            raise DatasetError(f"dataset file {str(path)!r} is not an .npz archive: {exc}") from exc
+        if not isinstance(npz, np.lib.npyio.NpzFile):
+            raise DatasetError(f"dataset file {str(path)!r} is a single .npy array, "
+                               "not an .npz expert dataset")
+        try:
+            with npz:
+                arrays = _read_dataset_arrays(npz, path)
+        except DatasetError:
+            raise
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+            raise DatasetError(f"dataset file {str(path)!r} is corrupt: {exc}") from exc
+        dataset = cls(**arrays)
+        _check_consistent(dataset, path)
+        dataset.sha256 = file_sha256(path)
+        return dataset
+
+
+def _read_dataset_arrays(npz, path: Path) -> dict:
+    """The constructor arguments of ExpertDataset from an open NpzFile, checking kind/version."""
+    where = repr(str(path))
+    names = set(npz.files)
+    if "version" not in names or "params_json" not in names:
+        raise DatasetError(f"{where} is an .npz file but not an ECAHD expert dataset "
+                           "(it has no 'version' and 'params_json' entries)")
+    stored = npz["version"]
+    if stored.shape != () or not np.issubdtype(stored.dtype, np.integer):
+        raise DatasetError(f"{where}: its 'version' entry must be one integer, got "
+                           f"{stored.dtype} of shape {stored.shape}")
+    version = int(stored)
+    if version != DATASET_VERSION:
+        raise DatasetError(f"{where} is expert dataset format version {version}, but this "
+                           f"ecahd_core reads version {DATASET_VERSION}; regenerate it with "
+                           "`ecahd dataset`")
+    try:
+        params = json.loads(str(npz["params_json"]))
+    except json.JSONDecodeError as exc:
+        raise DatasetError(f"{where}: its 'params_json' entry is not valid JSON: {exc}") from exc
+    if not isinstance(params, dict) or params.get("kind") != DATASET_KIND:
+        raise DatasetError(f"{where} is not an ECAHD expert dataset (kind "
+                           f"{params.get('kind') if isinstance(params, dict) else None!r})")
+    horizon = int(params.get("sparse_horizon", 0))
+    required = ["sparse", "dense", "full", "starts", "goals", "lengths", "map_data",
+                "map_resolution", "map_origin", "map_name", "map_fingerprint"]
+    required += [f"sparse_h{h}" for h in range(2, horizon + 1)]
+    missing = [name for name in required if name not in names]
+    if missing:
+        raise DatasetError(f"{where} lacks the entries {missing}")
+    return dict(
+        sparse=npz["sparse"], dense=npz["dense"], full=npz["full"],
+        sparse_h={h: npz[f"sparse_h{h}"] for h in range(2, horizon + 1)},
+        starts=npz["starts"], goals=npz["goals"], lengths=npz["lengths"],
+        map_data=npz["map_data"], map_resolution=float(npz["map_resolution"]),
+        map_origin=tuple(float(v) for v in npz["map_origin"]),
+        map_name=str(npz["map_name"]), map_fingerprint=str(npz["map_fingerprint"]),
+        params=params,
+    )
+
+
+def _check_consistent(ds: ExpertDataset, path: Path) -> None:
+    """Raise DatasetError if the arrays disagree with each other or with the parameters."""
+    where = repr(str(path))
+    N, Pg = ds.num_pairs, int(ds.params["sparse_horizon"])
+    expected = {
+        "sparse": (N, Pg, 2),
+        "dense": (N * (Pg - 1), int(ds.params["dense_points"]), 2),
+        "full": (N, int(ds.params["full_points"]), 2),
+        "starts": (N, 2),
+        "goals": (N, 2),
+        "lengths": (N,),
+        **{f"sparse_h{h}": (N, h, 2) for h in range(2, Pg + 1)},
+    }
+    actual = {"sparse": ds.sparse, "dense": ds.dense, "full": ds.full, "starts": ds.starts,
+              "goals": ds.goals, "lengths": ds.lengths,
+              **{f"sparse_h{h}": a for h, a in ds.sparse_h.items()}}
+    for name, shape in expected.items():
+        if actual[name].shape != shape:
+            raise DatasetError(f"{where}: {name} has shape {actual[name].shape}, expected {shape}")
+    try:
+        grid = ds.grid()
+    except ValueError as exc:
+        raise DatasetError(f"{where}: the stored map is invalid: {exc}") from exc
+    if grid.fingerprint() != ds.map_fingerprint:
+        raise DatasetError(f"{where}: the stored map's fingerprint {grid.fingerprint()} does not "
+                           f"match the recorded {ds.map_fingerprint} (file edited or corrupt)")
+
+
+def file_sha256(path: str | os.PathLike) -> str:
+    """Hex SHA-256 of a file's content (the dataset identity recorded in checkpoints)."""
+    h = hashlib.sha256()
+    try:
+        with open(path, "rb") as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                h.update(block)
+    except FileNotFoundError as exc:
+        raise DatasetError(f"file {str(path)!r} does not exist") from exc
+    return h.hexdigest()
+
+
+# ------------------------------------------------------------------------------ generation
+def generate_dataset(grid: GridMap, *, pairs: int, seed: int, footprint_spec: str = "circle",
+                     padding: float = 0.0, min_distance: float = 3.0, sparse_horizon: int = 10,
+                     dense_points: int = 4, full_points: int = 100, progress: bool = True,
+                     max_attempts: int | None = None) -> ExpertDataset:
+    """Plan ``pairs`` expert paths between seeded random start/goal pairs (paper Sec. IV-A).
+
+    Starts and goals are drawn uniformly from the clearance-free space (clearance = the
+    footprint's circumscribed radius + ``padding`` [m]) and must themselves be at least the
+    clearance away from every obstacle. A pair is rejected, and another drawn, if A* finds no
+    path or the smoothed path is shorter than ``min_distance`` [m]. The result always holds
+    exactly ``pairs`` paths; ``params`` records the attempts and the rejections.
+
+    Raises:
+        DatasetError: bad parameters, no clearance-free space, or fewer than ``pairs`` kept
+            paths after ``max_attempts`` (default 20 * pairs + 100) draws.
+    """
+    from tqdm import tqdm
+
+    _check_positive_int("pairs", pairs, 1)
+    _check_positive_int("sparse_horizon", sparse_horizon, 2)
+    _check_positive_int("dense_points", dense_points, 2)
+    _check_positive_int("full_points", full_points, 2)
+    if not (math.isfinite(min_distance) and min_distance >= 0):
+        raise DatasetError(f"min_distance must be a finite number >= 0 m, got {min_distance!r}")
+    if max_attempts is None:
+        max_attempts = 20 * pairs + 100
+
+    footprint = make_footprint(footprint_spec)
+    clearance = clearance_for_footprint(footprint, padding=padding)
+    planner = AStarPlanner(grid, clearance, smooth=True)
+    if not planner.mask.any():
+        raise DatasetError(f"no cell of map {grid.name!r} is {clearance:.3f} m away from the "
+                           f"obstacles, the clearance robot {footprint.name!r} needs")
+    rng = np.random.default_rng(seed)
+
+    samples: list[ExpertSample] = []
+    starts, goals = [], []
+    attempts = rejected_short = rejected_unreachable = 0
+    t0 = time.perf_counter()
+    with tqdm(total=pairs, disable=not progress, desc=f"A* expert paths on {grid.name}",
+              unit="pair") as bar:
+        while len(samples) < pairs:
+            if attempts >= max_attempts:
+                raise DatasetError(
+                    f"kept only {len(samples)} of {pairs} pairs after {attempts} attempts on map "
+                    f"{grid.name!r} ({rejected_short} paths shorter than {min_distance} m, "
+                    f"{rejected_unreachable} unreachable goals); lower min_distance")
+            attempts += 1
+            start = _sample_endpoint(rng, planner)
+            goal = _sample_endpoint(rng, planner)
+            try:
+                path = planner.plan(start, goal)
+            except PlanningError:
+                rejected_unreachable += 1
+                continue
+            if path_length(path) < min_distance:
+                rejected_short += 1
+                continue
+            samples.append(expert_sample(path, sparse_horizon=sparse_horizon,
+                                         dense_points=dense_points, full_points=full_points))
+            starts.append(start)
+            goals.append(goal)
+            bar.update(1)
+    elapsed = time.perf_counter() - t0
+    log.info("kept %d expert paths in %d attempts (%d too short, %d unreachable) in %.1f s",
+             pairs, attempts, rejected_short, rejected_unreachable, elapsed)
+
+    from ecahd_core import __version__
+
+    params = {
+        "kind": DATASET_KIND,
+        "version": DATASET_VERSION,
+        "seed": int(seed),
+        "footprint_spec": footprint_spec,
+        "footprint": footprint.name,
+        "padding": float(padding),
+        "clearance": clearance,
+        "min_distance": float(min_distance),
+        "pairs": int(pairs),
+        "sparse_horizon": int(sparse_horizon),
+        "dense_points": int(dense_points),
+        "full_points": int(full_points),
+        "attempts": attempts,
+        "rejected_short": rejected_short,
+        "rejected_unreachable": rejected_unreachable,
+        "expert": "astar+shortcut",
+        "ecahd_version": __version__,
+        "map": {"frame_id": grid.frame_id, "unknown_is_occupied": grid.unknown_is_occupied,
+                "occupied_threshold": grid.occupied_threshold},
+    }
+    return ExpertDataset(
+        sparse=np.stack([s.sparse for s in samples]).astype(DTYPE),
+        sparse_h={h: np.stack([s.sparse_h[h] for s in samples]).astype(DTYPE)
+                  for h in range(2, sparse_horizon + 1)},
+        dense=np.concatenate([s.dense for s in samples]).astype(DTYPE),
+        full=np.stack([s.full for s in samples]).astype(DTYPE),
+        starts=np.stack(starts).astype(DTYPE),
+        goals=np.stack(goals).astype(DTYPE),
+        lengths=np.array([s.length for s in samples], dtype=DTYPE),
+        map_data=np.array(grid.data, dtype=np.int8),
+        map_resolution=grid.resolution,
+        map_origin=grid.origin,
+        map_name=grid.name,
+        map_fingerprint=grid.fingerprint(),
+        params=params,
+    )
+
+
+def _sample_endpoint(rng: np.random.Generator, planner: AStarPlanner) -> np.ndarray:
+    """A random point [m] in a traversable cell whose own exact clearance is enough (a point
+    jittered inside a cell can be closer to an obstacle corner than the cell's centre)."""
+    for _ in range(_ENDPOINT_TRIES):
+        point = sample_free_point(rng, planner.mask, planner.grid)
+        if planner.point_clearance(point) >= planner.clearance - SDF_TOLERANCE:
+            return point
+    return sample_free_point(rng, planner.mask, planner.grid, jitter=False)  # centres always are
+
+
+def _check_positive_int(name: str, value, minimum: int) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise DatasetError(f"{name} must be an integer >= {minimum}, got {value!r}")

@@ -1,0 +1,222 @@
+"""Expert data generation and the versioned .npz format (ecahd_core.dataset, paper Sec. IV-A)."""
+import argparse
+
+import numpy as np
+import pytest
+
+from ecahd_core.astar import AStarPlanner
+from ecahd_core.commands import dataset as dataset_command
+from ecahd_core.dataset import (DATASET_VERSION, ExpertDataset, expert_sample, file_sha256,
+                                generate_dataset, points_at_arclength, resample_by_arclength)
+from ecahd_core.errors import DatasetError, TrajectoryError
+from ecahd_core.maps import builtin_map
+
+N_PAIRS = 6
+PG, PL, FULL = 10, 4, 100
+
+
+@pytest.fixture(scope="module")
+def grid():
+    return builtin_map("maze2d-large")
+
+
+@pytest.fixture(scope="module")
+def ds(grid):
+    return generate_dataset(grid, pairs=N_PAIRS, seed=3, progress=False)
+
+
+# ------------------------------------------------------------------------------ resampling
+def test_resample_l_shaped_path():
+    # legs of 2 m along x then 2 m along y: 5 points every 1 m of arc length
+    path = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0]])
+    np.testing.assert_allclose(resample_by_arclength(path, 5),
+                               [[0, 0], [1, 0], [2, 0], [2, 1], [2, 2]], atol=1e-12)
+    np.testing.assert_allclose(points_at_arclength(path, [0.5, 3.5, 9.0]),
+                               [[0.5, 0], [2, 1.5], [2, 2]], atol=1e-12)
+
+
+def test_resample_keeps_exact_end_points_and_handles_repeats():
+    path = np.array([[0.1, 0.3], [0.1, 0.3], [1.7, 2.9], [4.4, 0.2], [4.4, 0.2]])
+    out = resample_by_arclength(path, 7)
+    assert out.shape == (7, 2)
+    assert np.array_equal(out[0], path[0]) and np.array_equal(out[-1], path[-1])
+    steps = np.linalg.norm(np.diff(out, axis=0), axis=1)
+    assert np.all(steps <= steps.max()) and np.all(np.isfinite(out))
+
+
+def test_resample_zero_length_and_bad_input():
+    point = np.array([[1.0, 2.0]])
+    np.testing.assert_array_equal(resample_by_arclength(point, 4), np.tile(point, (4, 1)))
+    np.testing.assert_array_equal(resample_by_arclength(np.tile(point, (3, 1)), 3),
+                                  np.tile(point, (3, 1)))
+    with pytest.raises(TrajectoryError, match="n >= 2"):
+        resample_by_arclength(point, 1)
+    with pytest.raises(TrajectoryError, match="shape"):
+        resample_by_arclength(np.zeros((3, 3)), 4)
+    with pytest.raises(TrajectoryError, match="NaN"):
+        resample_by_arclength(np.array([[0.0, 0.0], [np.nan, 1.0]]), 4)
+
+
+def test_expert_sample_views():
+    # a straight 9 m path: sparse waypoints every 1 m, dense points every 1/3 m
+    path = np.array([[0.0, 0.0], [9.0, 0.0]])
+    s = expert_sample(path, sparse_horizon=10, dense_points=4, full_points=100)
+    np.testing.assert_allclose(s.sparse[:, 0], np.arange(10.0), atol=1e-12)
+    np.testing.assert_allclose(s.sparse_h[3][:, 0], [7.0, 8.0, 9.0], atol=1e-12)
+    np.testing.assert_allclose(s.dense[4, :, 0], [4.0, 4 + 1 / 3, 4 + 2 / 3, 5.0], atol=1e-12)
+    assert s.full.shape == (100, 2) and s.length == pytest.approx(9.0)
+
+
+# ----------------------------------------------------------------------------- generation
+def test_shapes(ds):
+    assert ds.num_pairs == N_PAIRS and ds.sparse_horizon == PG and ds.dense_points == PL
+    assert ds.sparse.shape == (N_PAIRS, PG, 2)
+    assert sorted(ds.sparse_h) == list(range(2, PG + 1))
+    for h, arr in ds.sparse_h.items():
+        assert arr.shape == (N_PAIRS, h, 2)
+    assert ds.dense.shape == (N_PAIRS * (PG - 1), PL, 2)
+    assert ds.full.shape == (N_PAIRS, FULL, 2)
+    assert ds.starts.shape == ds.goals.shape == (N_PAIRS, 2)
+    assert ds.lengths.shape == (N_PAIRS,)
+    assert all(a.dtype == np.float32 for a in (ds.sparse, ds.dense, ds.full, ds.starts))
+
+
+def test_end_points_and_lengths(ds):
+    for arr in (ds.sparse, ds.full):
+        assert np.array_equal(arr[:, 0], ds.starts) and np.array_equal(arr[:, -1], ds.goals)
+    assert np.all(ds.lengths >= 3.0)
+    # the full view follows the path, so its polyline is no longer than the path
+    full_len = np.linalg.norm(np.diff(ds.full, axis=1), axis=2).sum(axis=1)
+    assert np.all(full_len <= ds.lengths * (1 + 1e-5))
+    assert np.all(full_len >= np.linalg.norm(ds.goals - ds.starts, axis=1) - 1e-5)
+
+
+def test_shorter_horizons_continue_from_the_sparse_waypoints(ds):
+    for h, arr in ds.sparse_h.items():
+        k = PG - h  # waypoints already reached
+        assert np.array_equal(arr[:, 0], ds.sparse[:, k])
+        assert np.array_equal(arr[:, -1], ds.goals)
+        # evenly spaced sparse waypoints: the rest of the path in h points is the sparse tail
+        np.testing.assert_allclose(arr, ds.sparse[:, k:], atol=1e-4)
+
+
+def test_dense_segments_chain_the_sparse_waypoints(ds):
+    dense = ds.dense.reshape(N_PAIRS, PG - 1, PL, 2)
+    assert np.array_equal(dense[:, :, 0], ds.sparse[:, :-1])
+    assert np.array_equal(dense[:, :, -1], ds.sparse[:, 1:])
+    # P^l points evenly spaced by arc length: no chord longer than length / (9 * 3)
+    chords = np.linalg.norm(np.diff(dense, axis=2), axis=3)
+    assert np.all(chords <= ds.lengths[:, None, None] / ((PG - 1) * (PL - 1)) + 1e-5)
+
+
+def test_points_lie_in_the_clearance_free_space(ds):
+    grid = ds.grid()
+    planner = AStarPlanner(grid, ds.params["clearance"])
+    for arr in (ds.full, ds.dense, ds.starts):
+        rows, cols = grid.world_to_cell(arr.astype(np.float64))
+        assert np.all(planner.mask[rows, cols])
+    assert all(planner.point_clearance(p) >= 0.4 - 1e-6 for p in np.concatenate([ds.starts, ds.goals]))
+
+
+def test_seeded_generation_is_reproducible(grid, ds, tmp_path):
+    again = generate_dataset(grid, pairs=N_PAIRS, seed=3, progress=False)
+    for name in ("sparse", "dense", "full", "starts", "goals", "lengths"):
+        assert np.array_equal(getattr(again, name), getattr(ds, name))
+    assert again.params == ds.params
+    # byte-for-byte identical files
+    assert file_sha256(ds.save(tmp_path / "a.npz")) == file_sha256(again.save(tmp_path / "b.npz"))
+    other = generate_dataset(grid, pairs=N_PAIRS, seed=4, progress=False)
+    assert not np.array_equal(other.starts, ds.starts)
+
+
+def test_generation_parameters_are_checked(grid):
+    with pytest.raises(DatasetError, match="pairs"):
+        generate_dataset(grid, pairs=0, seed=0, progress=False)
+    with pytest.raises(DatasetError, match="sparse_horizon"):
+        generate_dataset(grid, pairs=1, seed=0, sparse_horizon=1, progress=False)
+    with pytest.raises(DatasetError, match="min_distance"):
+        generate_dataset(grid, pairs=1, seed=0, min_distance=float("nan"), progress=False)
+    with pytest.raises(DatasetError, match="kept only 0 of 2 pairs"):
+        generate_dataset(grid, pairs=2, seed=0, min_distance=100.0, max_attempts=20,
+                         progress=False)
+    with pytest.raises(DatasetError, match="no cell"):
+        generate_dataset(grid, pairs=1, seed=0, footprint_spec="[[1, 1], [-1, 1], [-1, -1], [1, -1]]",
+                         progress=False)
+
+
+# ---------------------------------------------------------------------------------- files
+def test_save_load_round_trip(ds, tmp_path):
+    path = ds.save(tmp_path / "sub" / "expert.npz")
+    assert path == tmp_path / "sub" / "expert.npz" and path.is_file()
+    loaded = ExpertDataset.load(path)
+    for name in ("sparse", "dense", "full", "starts", "goals", "lengths", "map_data"):
+        assert np.array_equal(getattr(loaded, name), getattr(ds, name)), name
+    for h in ds.sparse_h:
+        assert np.array_equal(loaded.sparse_h[h], ds.sparse_h[h])
+    assert loaded.params == ds.params
+    assert loaded.params["seed"] == 3 and loaded.params["footprint_spec"] == "circle"
+    assert loaded.params["clearance"] == pytest.approx(0.4)
+    assert loaded.map_name == "maze2d-large"
+    assert loaded.grid().fingerprint() == builtin_map("maze2d-large").fingerprint()
+    assert loaded.sha256 == file_sha256(path) == ds.sha256
+    assert len(loaded.sha256) == 64
+
+
+def _rewrite(src, dst, **changes):
+    with np.load(src) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    arrays.update(changes)
+    np.savez(dst, **arrays)
+    return dst
+
+
+def test_wrong_version_raises(ds, tmp_path):
+    good = ds.save(tmp_path / "good.npz")
+    bad = _rewrite(good, tmp_path / "v2.npz", version=np.asarray(DATASET_VERSION + 1))
+    with pytest.raises(DatasetError, match=f"version {DATASET_VERSION + 1}.*reads version "
+                                           f"{DATASET_VERSION}"):
+        ExpertDataset.load(bad)
+
+
+def test_missing_file_raises(tmp_path):
+    with pytest.raises(DatasetError, match="does not exist"):
+        ExpertDataset.load(tmp_path / "nope.npz")
+    with pytest.raises(DatasetError, match="does not exist"):
+        file_sha256(tmp_path / "nope.npz")
+
+
+def test_files_that_are_not_datasets_raise(ds, tmp_path):
+    other = tmp_path / "other.npz"
+    np.savez(other, a=np.zeros(3))
+    with pytest.raises(DatasetError, match="not an ECAHD expert dataset"):
+        ExpertDataset.load(other)
+    text = tmp_path / "text.npz"
+    text.write_text("hello")
+    with pytest.raises(DatasetError, match="not an .npz"):
+        ExpertDataset.load(text)
+    single = tmp_path / "single.npy"
+    np.save(single, np.zeros(3))
+    with pytest.raises(DatasetError, match="single .npy"):
+        ExpertDataset.load(single)
+    good = ds.save(tmp_path / "good.npz")
+    with np.load(good) as npz:
+        edited = npz["map_data"].copy()
+    edited[0, 0] = 0  # a wall cell made free
+    with pytest.raises(DatasetError, match="fingerprint"):
+        ExpertDataset.load(_rewrite(good, tmp_path / "edited.npz", map_data=edited))
+    with pytest.raises(DatasetError, match="dense has shape"):
+        ExpertDataset.load(_rewrite(good, tmp_path / "short.npz", dense=ds.dense[:-1]))
+
+
+# -------------------------------------------------------------------------------- command
+def test_command_writes_a_dataset(tmp_path, capsys):
+    parser = argparse.ArgumentParser()
+    dataset_command.add_arguments(parser)
+    out = tmp_path / "umaze.npz"
+    args = parser.parse_args(["--map", "maze2d-umaze", "--pairs", "3", "--seed", "1",
+                              "--out", str(out), "--no-progress"])
+    assert dataset_command.run(args) == 0
+    loaded = ExpertDataset.load(out)
+    assert loaded.num_pairs == 3 and loaded.map_name == "maze2d-umaze"
+    text = capsys.readouterr().out
+    assert "kept 3 pairs" in text and "MB" in text and str(out) in text
