@@ -26,6 +26,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="[m/cell] grid resolution for built-in mazes")
     p.add_argument("--robot", default="circle",
                    help="footprint: circle | quadruped | humanoid | Nav2 polygon '[[x, y], ...]'")
+    p.add_argument("--padding", type=float, default=0.0,
+                   help="[m] extra clearance around the footprint for A*")
     p.add_argument("--start", nargs=2, type=float, default=DEFAULT_START, metavar=("X", "Y"),
                    help="start position [m] in the map frame")
     p.add_argument("--goal", nargs=2, type=float, default=DEFAULT_GOAL, metavar=("X", "Y"),
@@ -40,7 +42,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from ecahd_core.astar import AStarPlanner
+    from ecahd_core.astar import AStarPlanner, clearance_for_footprint, path_length
     from ecahd_core.collision import check_collision
     from ecahd_core.dataset import resample_by_arclength
     from ecahd_core.footprint import make_footprint
@@ -54,14 +56,14 @@ def run(args: argparse.Namespace) -> int:
     goal = grid.validate_point(args.goal, "goal")
 
     t0 = time.perf_counter()
-    planner = AStarPlanner(grid, footprint.circumscribed_radius)
+    planner = AStarPlanner(grid, clearance_for_footprint(footprint, padding=args.padding))
     t1 = time.perf_counter()
     path = planner.plan(start, goal)
     t2 = time.perf_counter()
     report = check_collision(path, footprint, grid)
     waypoints = resample_by_arclength(path, args.waypoints)
     timings = {"inflate": (t1 - t0) * 1e3, "search": (t2 - t1) * 1e3, "total": (t2 - t0) * 1e3}
-    length = float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1)))
+    length = path_length(path)
     success = bool(np.linalg.norm(path[-1] - goal) <= 1.0)
 
     poses = report.dense_poses
