@@ -1,0 +1,56 @@
+"""The `ecahd` command: plan writes a figure and a well-formed record; bad input exits 2 naming
+the problem; map export round-trips."""
+import json
+
+import numpy as np
+import pytest
+
+from ecahd_core.maps import builtin_map, load_nav2_yaml
+from ecahd_ros.cli import main
+
+
+def test_plan_astar_writes_png_and_json(tmp_path):
+    png, rec = tmp_path / "p.png", tmp_path / "p.json"
+    assert main(["plan", "--map", "maze2d-large", "--robot", "humanoid", "--start", "1.5", "1.5",
+                 "--goal", "10.5", "7.5", "--png", str(png), "--json", str(rec)]) == 0
+    assert png.stat().st_size > 10_000
+    r = json.loads(rec.read_text())
+    for key in ("waypoints", "trajectory", "robot", "method", "success", "collision_free",
+                "timings_ms", "dd_calls"):
+        assert key in r
+    assert len(r["waypoints"]) == 10 and r["robot"] == "humanoid" and r["method"] == "astar"
+    traj = np.array(r["trajectory"])
+    assert np.allclose(traj[0], [1.5, 1.5]) and np.allclose(traj[-1], [10.5, 7.5])
+    assert r["success"] and r["collision_free"] and r["timings_ms"]["total"] > 0
+
+
+@pytest.mark.parametrize("goal, message", [
+    (["0.5", "0.5"], "inside an obstacle"),
+    (["50", "1"], "outside the map"),
+    (["nan", "1"], "non-finite"),
+])
+def test_plan_bad_goal_exits_2_with_message(tmp_path, capsys, goal, message):
+    code = main(["plan", "--goal", *goal, "--png", str(tmp_path / "x.png")])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "goal" in err and message in err
+
+
+def test_plan_bad_robot_and_map(tmp_path, capsys):
+    assert main(["plan", "--robot", "tank", "--png", str(tmp_path / "x.png")]) == 2
+    assert "unknown robot footprint 'tank'" in capsys.readouterr().err
+    assert main(["plan", "--map", str(tmp_path / "none.yaml"), "--png", str(tmp_path / "x.png")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+
+
+def test_map_export(tmp_path):
+    out = tmp_path / "large.yaml"
+    assert main(["map", "maze2d-large", "--export", str(out), "--png", str(tmp_path / "m.png")]) == 0
+    assert np.array_equal(load_nav2_yaml(out).occupied, builtin_map("maze2d-large").occupied)
+    assert (tmp_path / "m.png").is_file()
+
+
+def test_shipped_nav2_map_matches_builtin():
+    from pathlib import Path
+    shipped = Path(__file__).resolve().parents[1] / "config" / "maps" / "maze2d-large.yaml"
+    assert np.array_equal(load_nav2_yaml(shipped).occupied, builtin_map("maze2d-large").occupied)
