@@ -1,0 +1,258 @@
+"""Conditional sampling with inpainting and cost guidance (Algorithm 2 lines 1-9; Eqs. 1-2).
+
+The loop, per DDIM timestep t_k (noisiest first), in the NORMALISED space z:
+
+    z_K ~ N(0, I);  z_K <- inpaint(z_K)                                     (line 2)
+    for k:
+        eps = eps_theta(z_k, t_k)                                           (line 5, network)
+        if guided at k:
+            J, dJ/dx = guide(unnormalize(z_k))     # cost in metres         (line 4)
+            eps <- eps + omega * dJ/dz,  dJ/dz = dJ/dx * scale              (line 5)
+        z_{k-1}, z0_hat = DDIM(eps, t_k, z_k, eta)                          (line 6)
+        z_{k-1} <- inpaint(z_{k-1})
+    return unnormalize(z_0)                                                 (line 8)
+
+Gradient space: the guide differentiates J with respect to waypoints in metres; the sampler needs
+the gradient with respect to the normalised sample it updates. With x = z * scale + centre the
+chain rule gives dJ/dz = dJ/dx * scale per axis (:meth:`Normalizer.grad_to_normalized`), so omega
+acts on normalised units (the same omega gives a larger step on a larger map for the same J).
+
+Sign: eps-prediction, so adding +omega grad J to eps lowers J: the predicted x_0 is
+(z - sqrt(1 - alpha_bar) eps) / sqrt(alpha_bar), which moves by -omega sqrt(1 - alpha_bar) /
+sqrt(alpha_bar) grad J.
+
+Gradients: without a guide the whole loop runs under ``torch.inference_mode()``; with a guide it
+runs under ``torch.no_grad()`` and only the guide's J evaluation runs under ``enable_grad`` on a
+detached copy of the sample, so no graph ever reaches the network parameters.
+
+Batching: ``batch`` rows are denoised in one forward pass per step. For N candidates of B
+problems, give per-row conditions (B * N, 2), e.g. from
+:func:`~ecahd_core.diffusion.conditioning.expand_conditions` (problem-major rows).
+"""
+from __future__ import annotations
+
+from collections.abc import Callable, Collection, Mapping
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import torch
+from torch import Tensor, nn
+
+from ecahd_core.diffusion.conditioning import apply_conditioning, resolve_index
+from ecahd_core.diffusion.denoiser import Denoiser
+from ecahd_core.diffusion.guides import Guide, GuideOutput
+from ecahd_core.diffusion.normalizer import Normalizer
+from ecahd_core.diffusion.scheduler import DDIMScheduler
+from ecahd_core.errors import TrajectoryError
+
+if TYPE_CHECKING:
+    from ecahd_core.diffusion.training import Checkpoint
+
+DEFAULT_NUM_STEPS = 10  # DDIM sampling steps (of K = 100 training steps)
+DEFAULT_GUIDANCE_WEIGHT = 1.0  # omega
+
+GuideSteps = Callable[[int, int], bool] | Collection[int]
+"""Where guidance is applied: a callable ``(step_index, timestep) -> bool`` or a collection of
+step indices (0 = the first, noisiest step; negative counts from the last)."""
+
+
+@dataclass(frozen=True)
+class SampleOutput:
+    """Result of :func:`sample`.
+
+    Attributes:
+        trajectories: (B, P, 2) [m] the final samples, conditions exact.
+        normalized: (B, P, 2) the same in the normalised space.
+        timesteps: the DDIM timesteps used, noisiest first (S of them).
+        guided_steps: the step indices at which guidance was applied.
+        guide_costs: (G, B) J at each guided step (evaluated on z_k), or None without a guide.
+        intermediates: (S + 1, B, P, 2) [m] z_K then every z after each step, or None.
+        pred_x0: (S, B, P, 2) [m] the x_0 predicted at each step, or None.
+    """
+
+    trajectories: Tensor
+    normalized: Tensor
+    timesteps: tuple[int, ...]
+    guided_steps: tuple[int, ...] = ()
+    guide_costs: Tensor | None = None
+    intermediates: Tensor | None = None
+    pred_x0: Tensor | None = None
+
+
+def _device_of(model: Any, scheduler: DDIMScheduler) -> torch.device:
+    """The model's device (from its parameters), else the scheduler's."""
+    if isinstance(model, nn.Module):
+        for p in model.parameters():
+            return p.device
+    return scheduler.alphas_cumprod.device
+
+
+def _guided_predicate(guide_steps: GuideSteps | None, n: int) -> Callable[[int, int], bool]:
+    if guide_steps is None:
+        return lambda i, t: True
+    if callable(guide_steps):
+        return guide_steps
+    indices = set()
+    for i in guide_steps:
+        if not -n <= int(i) < n:
+            raise ValueError(f"guide step index {i} is outside 0..{n - 1} ({n} sampling steps)")
+        indices.add(int(i) % n)
+    return lambda i, t: i in indices
+
+
+def _condition_tensors(conditions: Mapping[int, Any], batch: int, horizon: int,
+                       device: torch.device) -> dict[int, Tensor]:
+    """{index: (2,) or (B, 2) float32 [m]} on ``device``, validated."""
+    out = {}
+    for index, value in conditions.items():
+        resolve_index(int(index), horizon)
+        value = torch.as_tensor(value, dtype=torch.float32, device=device)
+        if value.shape not in ((2,), (batch, 2)):
+            raise TrajectoryError(f"condition {index} must have shape (2,) or ({batch}, 2) "
+                                  f"[m], got {tuple(value.shape)}")
+        if not torch.isfinite(value).all():
+            raise TrajectoryError(f"condition {index} is not finite: {value.tolist()}")
+        out[int(index)] = value
+    return out
+
+
+def sample(model: Denoiser, scheduler: DDIMScheduler, normalizer: Normalizer, *, batch: int,
+           horizon: int, conditions: Mapping[int, Any], num_steps: int = DEFAULT_NUM_STEPS,
+           eta: float = 0.0, generator: torch.Generator | None = None,
+           guide: Guide | None = None, guidance_weight: float = DEFAULT_GUIDANCE_WEIGHT,
+           guide_steps: GuideSteps | None = None, return_intermediates: bool = False,
+           model_kwargs: Mapping[str, Any] | None = None) -> SampleOutput:
+    """Sample ``batch`` trajectories of ``horizon`` waypoints with inpainting and optional guidance.
+
+    Args:
+        model: eps_theta, called as ``model(z (B, P, 2), t (B,), **model_kwargs)``; put it in
+            eval mode.
+        scheduler: the DDIM scheduler of the model's training schedule.
+        normalizer: the model's normaliser (metres <-> normalised).
+        batch: B, the number of rows sampled together.
+        horizon: P, waypoints per trajectory.
+        conditions: {index: (B, 2) or (2,) [m]}, e.g. {0: start, -1: goal}.
+        num_steps: DDIM steps, 1..K.
+        eta: DDIM stochasticity (0 = deterministic given the initial noise).
+        generator: randomness for the initial noise and eta > 0 (on the model's device).
+        guide: cost J as a :class:`~ecahd_core.diffusion.guides.Guide` (metres), or None.
+        guidance_weight: omega of Algorithm 2 line 5.
+        guide_steps: at which steps to guide (default: all), see :data:`GuideSteps`.
+        return_intermediates: also return every z_k and predicted x_0.
+        model_kwargs: extra model inputs, e.g. {"map_feature": (1, d_model)}.
+    Returns:
+        :class:`SampleOutput`.
+    """
+    if batch < 1 or horizon < 2:
+        raise ValueError(f"need batch >= 1 and horizon >= 2, got batch={batch}, horizon={horizon}")
+    device = _device_of(model, scheduler)
+    model_kwargs = dict(model_kwargs or {})
+    timesteps = scheduler.set_timesteps(num_steps)
+    is_guided = _guided_predicate(guide_steps, len(timesteps)) if guide is not None else None
+    # No graph at all without a guide; with one, only the J evaluation below re-enables grad.
+    context = torch.inference_mode() if guide is None else torch.no_grad()
+
+    with context:
+        cond_m = _condition_tensors(conditions, batch, horizon, device)  # [m]
+        cond = {i: normalizer.normalize(v) for i, v in cond_m.items()}  # normalised
+
+        def to_metres(zk: Tensor) -> Tensor:  # (B, P, 2) -> (B, P, 2) [m]
+            # conditions re-imposed in metres: bit-exact, unlike the float32 round trip
+            return apply_conditioning(normalizer.unnormalize(zk), cond_m)
+
+        z = torch.randn((batch, horizon, 2), generator=generator, device=device)  # z_K
+        z = apply_conditioning(z, cond)
+        xs, x0s, costs, guided = [z], [], [], []
+        for i, t in enumerate(timesteps):
+            t_batch = torch.full((batch,), t, dtype=torch.long, device=device)
+            eps = model(z, t_batch, **model_kwargs)  # (B, P, 2)
+            if is_guided is not None and is_guided(i, t):
+                out = _evaluate_guide(guide, to_metres(z), batch, horizon)
+                eps = eps + guidance_weight * normalizer.grad_to_normalized(out.grad)
+                costs.append(out.cost)
+                guided.append(i)
+            step = scheduler.step(eps, t, z, eta=eta, generator=generator)
+            z = apply_conditioning(step.prev_sample, cond)
+            if return_intermediates:
+                xs.append(z)
+                x0s.append(apply_conditioning(step.pred_x0, cond))
+        return SampleOutput(
+            trajectories=to_metres(z), normalized=z,
+            timesteps=timesteps, guided_steps=tuple(guided),
+            guide_costs=torch.stack(costs) if costs else None,
+            intermediates=torch.stack([to_metres(v) for v in xs]) if return_intermediates else None,
+            pred_x0=torch.stack([to_metres(v) for v in x0s]) if return_intermediates else None)
+
+
+def _evaluate_guide(guide: Guide, traj_m: Tensor, batch: int, horizon: int) -> GuideOutput:
+    """J and dJ/dx on a detached copy of the sample, with gradients enabled only here."""
+    with torch.enable_grad():
+        out = guide(traj_m.detach().clone())
+    if out.cost.shape != (batch,) or out.grad.shape != (batch, horizon, 2):
+        raise TrajectoryError(f"guide returned cost {tuple(out.cost.shape)} and grad "
+                              f"{tuple(out.grad.shape)}; expected ({batch},) and "
+                              f"({batch}, {horizon}, 2)")
+    if not torch.isfinite(out.grad).all():
+        raise TrajectoryError("guide returned a non-finite gradient")
+    return GuideOutput(cost=out.cost.detach(), grad=out.grad.detach())
+
+
+@dataclass(frozen=True, kw_only=True)
+class SamplerConfig:
+    """Sampling settings of a :class:`DiffusionSampler`.
+
+    Attributes:
+        num_steps: DDIM steps (1..K).
+        eta: DDIM stochasticity.
+        guidance_weight: omega.
+    """
+
+    num_steps: int = DEFAULT_NUM_STEPS
+    eta: float = 0.0
+    guidance_weight: float = DEFAULT_GUIDANCE_WEIGHT
+
+    def __post_init__(self) -> None:
+        if int(self.num_steps) != self.num_steps or self.num_steps < 1:
+            raise ValueError(f"num_steps must be a positive integer, got {self.num_steps}")
+        if self.eta < 0:
+            raise ValueError(f"eta must be >= 0, got {self.eta}")
+
+
+class DiffusionSampler:
+    """A model with its scheduler, normaliser and sampling settings: ``sampler.sample(...)``.
+
+    Args:
+        model: eps_theta (eval mode).
+        scheduler: DDIM scheduler of the model's training schedule (moved to the model's device).
+        normalizer: the model's normaliser.
+        config: sampling settings.
+    """
+
+    def __init__(self, model: Denoiser, scheduler: DDIMScheduler, normalizer: Normalizer,
+                 config: SamplerConfig | None = None) -> None:
+        self.model = model
+        self.scheduler = scheduler.to(_device_of(model, scheduler))
+        self.normalizer = normalizer
+        self.config = config or SamplerConfig()
+
+    @classmethod
+    def from_checkpoint(cls, checkpoint: "Checkpoint", *, device: torch.device | str = "cpu",
+                        config: SamplerConfig | None = None) -> "DiffusionSampler":
+        """The EMA model of a loaded checkpoint, in eval mode on ``device``."""
+        return cls(checkpoint.build_model(device=device), checkpoint.build_scheduler(),
+                   checkpoint.normalizer, config)
+
+    @property
+    def device(self) -> torch.device:
+        return _device_of(self.model, self.scheduler)
+
+    def sample(self, *, batch: int, horizon: int, conditions: Mapping[int, Any],
+               generator: torch.Generator | None = None, guide: Guide | None = None,
+               guide_steps: GuideSteps | None = None, return_intermediates: bool = False,
+               model_kwargs: Mapping[str, Any] | None = None) -> SampleOutput:
+        """:func:`sample` with this sampler's model and settings."""
+        return sample(self.model, self.scheduler, self.normalizer, batch=batch, horizon=horizon,
+                      conditions=conditions, num_steps=self.config.num_steps, eta=self.config.eta,
+                      generator=generator, guide=guide,
+                      guidance_weight=self.config.guidance_weight, guide_steps=guide_steps,
+                      return_intermediates=return_intermediates, model_kwargs=model_kwargs)

@@ -1,0 +1,269 @@
+"""Sampling loop (inpainting, guidance, batching) and its parts: normaliser, conditioning,
+the Transformer denoiser."""
+import pytest
+import torch
+
+from ecahd_core.diffusion.conditioning import (apply_conditioning, condition_mask,
+                                               expand_conditions)
+from ecahd_core.diffusion.denoiser import DenoiserConfig, TransformerDenoiser
+from ecahd_core.diffusion.guides import CostGuide, GuideOutput
+from ecahd_core.diffusion.normalizer import Normalizer
+from ecahd_core.diffusion.sampler import DiffusionSampler, SamplerConfig, sample
+from ecahd_core.diffusion.scheduler import DDIMScheduler
+from ecahd_core.errors import TrajectoryError
+
+# A 4 m x 2 m map: centre (2, 1), scale (2, 1) -- anisotropic on purpose (chain rule).
+NORMALIZER = Normalizer.from_bounds(0.0, 0.0, 4.0, 2.0)
+
+
+def tiny_model(**kw):
+    torch.manual_seed(0)
+    cfg = DenoiserConfig(max_horizon=10, d_model=32, n_layers=2, n_heads=4, **kw)
+    return TransformerDenoiser(cfg).eval()
+
+
+class OracleDenoiser:
+    """Knows the clean trajectory x0 (normalised, (B, P, 2)) and returns the exact noise."""
+
+    def __init__(self, scheduler, x0):
+        self.scheduler, self.x0, self.calls = scheduler, x0, []
+
+    def __call__(self, x, t):
+        self.calls.append(tuple(x.shape))
+        a = self.scheduler.alphas_cumprod[t][:, None, None]
+        return (x - a.sqrt() * self.x0) / (1 - a).sqrt()
+
+
+# ------------------------------------------------------------------------------- normaliser
+def test_normalizer_bounds_round_trip_and_dict():
+    n = NORMALIZER
+    corners = torch.tensor([[0.0, 0.0], [4.0, 2.0], [2.0, 1.0]])
+    torch.testing.assert_close(n.normalize(corners),
+                               torch.tensor([[-1.0, -1.0], [1.0, 1.0], [0.0, 0.0]]))
+    x = torch.randn(3, 5, 2)
+    torch.testing.assert_close(n.unnormalize(n.normalize(x)), x)
+    assert Normalizer.from_dict(n.to_dict()) == n
+    with pytest.raises(ValueError, match="scale"):
+        Normalizer(centre=(0, 0), scale=(1, 0))
+    with pytest.raises(ValueError, match="xmax > xmin"):
+        Normalizer.from_bounds(1, 0, 1, 1)
+
+
+def test_normalizer_gradient_chain_rule_matches_autograd():
+    z = torch.randn(2, 4, 2, requires_grad=True)
+    cost = lambda x: (x[..., 0] ** 2 + 3 * x[..., 1]).sum()  # noqa: E731  J in metres
+    (dz,) = torch.autograd.grad(cost(NORMALIZER.unnormalize(z)), z)
+    x = NORMALIZER.unnormalize(z).detach().requires_grad_(True)
+    (dx,) = torch.autograd.grad(cost(x), x)
+    torch.testing.assert_close(NORMALIZER.grad_to_normalized(dx), dz)
+
+
+# ----------------------------------------------------------------------------- conditioning
+def test_apply_conditioning_is_pure_and_takes_negative_indices():
+    x = torch.zeros(3, 5, 2)
+    goal = torch.tensor([[1.0, 2.0], [3.0, 4.0], [5.0, 6.0]])
+    out = apply_conditioning(x, {0: torch.tensor([9.0, 8.0]), -1: goal})
+    assert torch.equal(x, torch.zeros(3, 5, 2))  # input untouched
+    assert torch.equal(out[:, 0], torch.tensor([[9.0, 8.0]] * 3))
+    assert torch.equal(out[:, 4], goal)
+    assert torch.equal(out[:, 1:4], torch.zeros(3, 3, 2))
+    assert condition_mask(5, (0, -1)).tolist() == [True, False, False, False, True]
+    with pytest.raises(TrajectoryError, match="outside a horizon of 5"):
+        apply_conditioning(x, {5: goal})
+    with pytest.raises(TrajectoryError, match=r"\(2,\) or \(3, 2\)"):
+        apply_conditioning(x, {0: torch.zeros(2, 2)})
+
+
+def test_expand_conditions_is_problem_major():
+    starts = torch.tensor([[0.0, 0.0], [1.0, 1.0]])
+    out = expand_conditions({0: starts, -1: torch.tensor([5.0, 5.0])}, 3)
+    assert out[0].tolist() == [[0.0, 0.0]] * 3 + [[1.0, 1.0]] * 3
+    assert out[-1].tolist() == [5.0, 5.0]
+
+
+# -------------------------------------------------------------------------------- denoiser
+@pytest.mark.parametrize("horizon", [2, 5, 10])
+def test_denoiser_handles_every_horizon_up_to_max(horizon):
+    model = tiny_model()
+    eps = model(torch.randn(3, horizon, 2), torch.tensor([0, 50, 99]))
+    assert eps.shape == (3, horizon, 2)
+    with pytest.raises(ValueError, match="max_horizon"):
+        model(torch.randn(3, 11, 2), 5)
+
+
+def test_denoiser_config_is_validated_and_keyword_only():
+    with pytest.raises(TypeError):
+        DenoiserConfig(10)  # keyword-only
+    with pytest.raises(ValueError, match="divisible"):
+        DenoiserConfig(max_horizon=10, d_model=30, n_heads=4)
+    cfg = DenoiserConfig(max_horizon=10)
+    assert DenoiserConfig.from_dict(cfg.to_dict()) == cfg
+
+
+def test_denoiser_with_map_encoder_runs_forward():
+    model = tiny_model(use_map_encoder=True)
+    x, t = torch.randn(4, 6, 2), torch.full((4,), 10)
+    image = (torch.rand(1, 1, 40, 56) > 0.7).float()
+    eps = model(x, t, map_image=image)  # one map broadcast to the batch
+    assert eps.shape == (4, 6, 2)
+    feature = model.encode_map(image)
+    assert feature.shape == (1, 32)
+    torch.testing.assert_close(model(x, t, map_feature=feature), eps)
+    eps_batch = model(x, t, map_image=image.expand(4, -1, -1, -1))
+    torch.testing.assert_close(eps_batch, eps, rtol=1e-4, atol=1e-5)
+    with pytest.raises(ValueError, match="map_image or map_feature"):
+        model(x, t)
+    with pytest.raises(ValueError, match="use_map_encoder=False"):
+        tiny_model()(x, t, map_image=image)
+    # through the sampler, with the map encoded once
+    out = sample(model, DDIMScheduler(), NORMALIZER, batch=4, horizon=6,
+                 conditions={0: torch.tensor([0.5, 0.5])}, num_steps=3,
+                 generator=torch.Generator().manual_seed(0), model_kwargs={"map_feature": feature})
+    assert out.trajectories.shape == (4, 6, 2)
+
+
+# --------------------------------------------------------------------------------- sampling
+def test_inpainted_states_are_exact_in_the_output():
+    model, scheduler = tiny_model(), DDIMScheduler()
+    starts = torch.tensor([[0.3, 0.1], [3.9, 1.7], [1.234567, 0.7654321]])
+    goal = torch.tensor([2.2, 1.9])
+    out = sample(model, scheduler, NORMALIZER, batch=3, horizon=7,
+                 conditions={0: starts, -1: goal}, num_steps=5, eta=0.7,
+                 generator=torch.Generator().manual_seed(0), return_intermediates=True)
+    assert out.trajectories.shape == (3, 7, 2)
+    assert torch.equal(out.trajectories[:, 0], starts)
+    assert torch.equal(out.trajectories[:, -1], goal.expand(3, 2))
+    assert out.intermediates.shape == (6, 3, 7, 2) and out.pred_x0.shape == (5, 3, 7, 2)
+    assert torch.equal(out.intermediates[:, :, 0], starts.expand(6, 3, 2))
+    assert torch.equal(out.intermediates[-1], out.trajectories)
+    assert out.timesteps == (99, 79, 59, 39, 19)
+
+
+def test_sampling_is_reproducible_for_a_seed():
+    model, scheduler = tiny_model(), DDIMScheduler()
+    kw = dict(batch=2, horizon=5, conditions={0: torch.tensor([1.0, 1.0])}, num_steps=4, eta=1.0)
+    a = sample(model, scheduler, NORMALIZER, generator=torch.Generator().manual_seed(7), **kw)
+    b = sample(model, scheduler, NORMALIZER, generator=torch.Generator().manual_seed(7), **kw)
+    c = sample(model, scheduler, NORMALIZER, generator=torch.Generator().manual_seed(8), **kw)
+    assert torch.equal(a.trajectories, b.trajectories)
+    assert not torch.equal(a.trajectories, c.trajectories)
+
+
+def test_candidates_times_problems_in_one_forward_per_step():
+    scheduler = DDIMScheduler()
+    B, N, P = 3, 4, 6
+    starts = torch.tensor([[0.5, 0.5], [1.0, 1.5], [3.5, 0.2]])
+    goals = torch.tensor([[3.5, 1.5], [2.0, 0.5], [0.5, 1.8]])
+    x0 = NORMALIZER.normalize(starts[:, None] + (goals - starts)[:, None]
+                              * torch.linspace(0, 1, P)[None, :, None])  # (B, P, 2)
+    oracle = OracleDenoiser(scheduler, x0.repeat_interleave(N, dim=0))
+    out = sample(oracle, scheduler, NORMALIZER, batch=B * N, horizon=P,
+                 conditions=expand_conditions({0: starts, -1: goals}, N), num_steps=8,
+                 eta=1.0, generator=torch.Generator().manual_seed(0))
+    assert oracle.calls == [(B * N, P, 2)] * 8  # one batched forward per DDIM step
+    per_problem = out.trajectories.view(B, N, P, 2)
+    assert torch.equal(per_problem[:, :, 0], starts[:, None].expand(B, N, 2))
+    torch.testing.assert_close(per_problem, NORMALIZER.unnormalize(x0)[:, None].expand(B, N, P, 2),
+                               rtol=0, atol=1e-4)
+
+
+WALL_X = 2.5  # [m]: the 'wall' is x > 2.5
+
+
+def wall_cost(traj):
+    """J = sum over waypoints of relu(x - WALL_X)^2, traj (B, P, 2) [m] -> (B,)."""
+    return torch.relu(traj[..., 0] - WALL_X).pow(2).sum(-1)
+
+
+def wall_problem():
+    # The oracle's clean trajectories run from x = 0.5 to x = 3.5 m through the wall.
+    scheduler = DDIMScheduler()
+    B, P = 6, 8
+    y = torch.linspace(0.2, 1.8, B)
+    xs = torch.linspace(0.5, 3.5, P)
+    x0_m = torch.stack([xs.expand(B, P), y[:, None].expand(B, P)], dim=-1)  # (B, P, 2) [m]
+    oracle = OracleDenoiser(scheduler, NORMALIZER.normalize(x0_m))
+    return scheduler, oracle, x0_m, dict(batch=B, horizon=P, conditions={0: x0_m[:, 0]},
+                                         num_steps=10, eta=0.0)
+
+
+def test_guidance_moves_samples_out_of_the_wall():
+    scheduler, oracle, x0_m, kw = wall_problem()
+    plain = sample(oracle, scheduler, NORMALIZER, generator=torch.Generator().manual_seed(0), **kw)
+    torch.testing.assert_close(plain.trajectories, x0_m, rtol=0, atol=1e-4)  # in the wall
+    guided = sample(oracle, scheduler, NORMALIZER, generator=torch.Generator().manual_seed(0),
+                    guide=CostGuide(wall_cost), guidance_weight=1.0, **kw)
+    before, after = wall_cost(plain.trajectories), wall_cost(guided.trajectories)
+    assert (after < before).all()
+    assert after.sum() < 0.5 * before.sum()  # measured: 8.08 -> 2.57
+    assert guided.guided_steps == tuple(range(10)) and guided.guide_costs.shape == (10, 6)
+    # the start stays exact; y is untouched (the cost does not depend on it)
+    assert torch.equal(guided.trajectories[:, 0], x0_m[:, 0])
+    torch.testing.assert_close(guided.trajectories[..., 1], x0_m[..., 1], rtol=0, atol=1e-4)
+
+
+def test_guide_steps_choose_where_guidance_applies():
+    scheduler, oracle, _, kw = wall_problem()
+    gen = lambda: torch.Generator().manual_seed(0)  # noqa: E731
+    plain = sample(oracle, scheduler, NORMALIZER, generator=gen(), **kw)
+    none = sample(oracle, scheduler, NORMALIZER, generator=gen(), guide=CostGuide(wall_cost),
+                  guide_steps=set(), **kw)
+    assert none.guided_steps == () and none.guide_costs is None
+    torch.testing.assert_close(none.trajectories, plain.trajectories, rtol=0, atol=0)
+    last = sample(oracle, scheduler, NORMALIZER, generator=gen(), guide=CostGuide(wall_cost),
+                  guide_steps={-1, -2}, **kw)
+    assert last.guided_steps == (8, 9)
+    late = sample(oracle, scheduler, NORMALIZER, generator=gen(), guide=CostGuide(wall_cost),
+                  guide_steps=lambda i, t: t < 50, **kw)
+    assert late.guided_steps == (5, 6, 7, 8, 9)
+    with pytest.raises(ValueError, match="outside 0..9"):
+        sample(oracle, scheduler, NORMALIZER, guide=CostGuide(wall_cost), guide_steps={10}, **kw)
+
+
+def test_guidance_gradients_never_reach_the_model():
+    model = tiny_model()
+    assert all(p.requires_grad for p in model.parameters())
+    seen = []
+
+    def guide(traj):
+        seen.append((torch.is_grad_enabled(), traj.requires_grad, traj.grad_fn))
+        return CostGuide(wall_cost)(traj)
+
+    out = sample(model, DDIMScheduler(), NORMALIZER, batch=2, horizon=5,
+                 conditions={0: torch.tensor([0.5, 1.0])}, num_steps=4, guide=guide,
+                 generator=torch.Generator().manual_seed(0))
+    assert seen == [(True, False, None)] * 4  # grad on, but on a detached copy
+    assert all(p.grad is None for p in model.parameters())
+    assert out.trajectories.grad_fn is None and not out.trajectories.requires_grad
+
+
+def test_unguided_sampling_runs_in_inference_mode():
+    model = tiny_model()
+    out = sample(model, DDIMScheduler(), NORMALIZER, batch=2, horizon=5,
+                 conditions={0: torch.tensor([0.5, 1.0])}, num_steps=2)
+    assert out.trajectories.is_inference()
+
+
+def test_bad_guide_output_and_bad_conditions_are_reported():
+    model, scheduler = tiny_model(), DDIMScheduler()
+    kw = dict(batch=2, horizon=5, num_steps=2)
+    bad_guide = lambda traj: GuideOutput(cost=torch.zeros(2), grad=torch.zeros(2, 4, 2))  # noqa
+    with pytest.raises(TrajectoryError, match="guide returned"):
+        sample(model, scheduler, NORMALIZER, conditions={0: torch.zeros(2)}, guide=bad_guide, **kw)
+    with pytest.raises(TrajectoryError, match="not finite"):
+        sample(model, scheduler, NORMALIZER, conditions={0: torch.tensor([float("nan"), 0.0])},
+               **kw)
+    with pytest.raises(TrajectoryError, match=r"\(2,\) or \(2, 2\)"):
+        sample(model, scheduler, NORMALIZER, conditions={0: torch.zeros(3, 2)}, **kw)
+
+
+def test_diffusion_sampler_wraps_sample():
+    model = tiny_model()
+    sampler = DiffusionSampler(model, DDIMScheduler(), NORMALIZER, SamplerConfig(num_steps=3))
+    out = sampler.sample(batch=2, horizon=4, conditions={0: torch.tensor([1.0, 1.0])},
+                         generator=torch.Generator().manual_seed(0))
+    ref = sample(model, DDIMScheduler(), NORMALIZER, batch=2, horizon=4,
+                 conditions={0: torch.tensor([1.0, 1.0])}, num_steps=3,
+                 generator=torch.Generator().manual_seed(0))
+    assert torch.equal(out.trajectories, ref.trajectories)
+    assert sampler.device == torch.device("cpu")
