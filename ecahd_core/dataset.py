@@ -398,8 +398,8 @@ def generate_dataset(grid: GridMap, *, pairs: int, seed: int, footprint_spec: st
                     f"{grid.name!r} ({rejected_short} paths shorter than {min_distance} m, "
                     f"{rejected_unreachable} unreachable goals); lower min_distance")
             attempts += 1
-            start = _sample_endpoint(rng, planner)
-            goal = _sample_endpoint(rng, planner)
+            start = sample_endpoint(rng, planner)
+            goal = sample_endpoint(rng, planner)
             try:
                 path = planner.plan(start, goal)
             except PlanningError:
@@ -458,7 +458,7 @@ def generate_dataset(grid: GridMap, *, pairs: int, seed: int, footprint_spec: st
     )
 
 
-def _sample_endpoint(rng: np.random.Generator, planner: AStarPlanner) -> np.ndarray:
+def sample_endpoint(rng: np.random.Generator, planner: AStarPlanner) -> np.ndarray:
     """A random point [m] in a traversable cell whose own exact clearance is enough (a point
     jittered inside a cell can be closer to an obstacle corner than the cell's centre)."""
     for _ in range(_ENDPOINT_TRIES):

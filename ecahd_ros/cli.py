@@ -3,6 +3,7 @@
     ecahd plan      plan one path on a map and draw it
     ecahd map       describe a map, export it as Nav2 YAML + PGM, draw it
     ecahd dataset   generate A* expert data for training
+    ecahd train     train one diffusion model;  ecahd train-all: a map's dataset and all models
     ecahd bench     benchmarks (cost, ...)
 
 Subcommand modules keep their heavy imports (torch, rclpy) inside ``run``, so building the parser
@@ -22,6 +23,9 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "plan": ("ecahd_core.commands.plan", "plan one path on a map and write a PNG / JSON"),
     "map": ("ecahd_core.commands.map", "describe / export a map (Nav2 YAML + PGM, PNG)"),
     "dataset": ("ecahd_core.commands.dataset", "generate A* expert data (.npz) for training"),
+    "train": ("ecahd_core.commands.train", "train one diffusion model (sd, dd, fd) on a dataset"),
+    "train-all": ("ecahd_core.commands.train:all",
+                  "dataset + all models of a map, seeded (reproduces the shipped models)"),
     "bench": ("ecahd_core.commands.bench", "run a benchmark and print ratios against a reference"),
 }
 
@@ -34,9 +38,11 @@ def build_parser() -> argparse.ArgumentParser:
     for name, (module_name, help_text) in SUBCOMMANDS.items():
         p = sub.add_parser(name, help=help_text, description=help_text,
                            formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+        module_name, _, variant = module_name.partition(":")
         module = importlib.import_module(module_name)
-        module.add_arguments(p)
-        p.set_defaults(_run=module.run)
+        suffix = f"_{variant}" if variant else ""
+        getattr(module, f"add{suffix}_arguments")(p)
+        p.set_defaults(_run=getattr(module, f"run{suffix}"))
     return parser
 
 

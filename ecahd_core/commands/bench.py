@@ -1,6 +1,8 @@
 """``ecahd bench``: benchmarks, one sub-subcommand each.
 
     ecahd bench cost [--json FILE] [--repeats N] [--threads T]   the cost J, batched vs loops
+    ecahd bench sampling [--json FILE]        SD / DD / FD latency next to the paper's figures
+    ecahd bench sd-quality [--problems 128]   SD alone: goal reach, collision-free (point robot)
 
 ``BENCHMARKS`` maps each name to its argument builder and runner; a new benchmark (sampling,
 planning, ...) is one more entry. torch is only imported when a benchmark runs, so
@@ -84,9 +86,86 @@ def _run_cost(args: argparse.Namespace) -> int:
     return 0
 
 
+# -------------------------------------------------------------------------------- sampling
+def _add_model_arguments(parser: argparse.ArgumentParser, kinds: tuple[str, ...]) -> None:
+    parser.add_argument("--map", default="maze2d-large", help="built-in maze or Nav2 map YAML")
+    for kind in kinds:
+        parser.add_argument(f"--{kind}", metavar="CKPT", default=None,
+                            help=f"{kind.upper()} checkpoint (default: the shipped model)")
+
+
+def _add_sampling_arguments(parser: argparse.ArgumentParser) -> None:
+    _add_model_arguments(parser, ("sd", "dd", "fd"))
+    parser.add_argument("--robot", default="circle", help="footprint for the guided runs")
+    parser.add_argument("--repeats", type=_int_at_least(1), default=20, metavar="N",
+                        help="timed runs per measurement (the median is reported)")
+    parser.add_argument("--threads", type=_int_at_least(0), default=0, metavar="T",
+                        help="torch intra-op threads; 0 keeps torch's default")
+    parser.add_argument("--json", metavar="FILE", help="also write the result as JSON to FILE")
+
+
+def _run_sampling(args: argparse.Namespace) -> int:
+    from ecahd_core.bench.sampling import (SamplingBenchSettings, format_table,
+                                           run_sampling_benchmark)
+
+    settings = SamplingBenchSettings(map=args.map, robot=args.robot, repeats=args.repeats,
+                                     threads=args.threads or None)
+    models = {k: getattr(args, k) for k in ("sd", "dd", "fd") if getattr(args, k)}
+    result = run_sampling_benchmark(settings, models=models)
+    print(format_table(result))
+    if args.json:
+        _write_json(args.json, result.to_dict())
+    return 0
+
+
+# ------------------------------------------------------------------------------ sd-quality
+def _add_sd_quality_arguments(parser: argparse.ArgumentParser) -> None:
+    _add_model_arguments(parser, ("sd",))
+    parser.add_argument("--problems", type=_int_at_least(1), default=128, metavar="N",
+                        help="held-out start/goal pairs (>= 3 m apart along the A* path)")
+    parser.add_argument("--seed", type=int, default=2026, help="seed of the problems")
+    parser.add_argument("--sample-seed", type=int, default=0, help="seed of the samples")
+    parser.add_argument("--steps", type=_int_at_least(1), default=None,
+                        help="DDIM steps (default: the checkpoint's)")
+    parser.add_argument("--eta", type=float, default=0.0, help="DDIM eta")
+    parser.add_argument("--png", metavar="FILE", help="draw the first 8 plans")
+    parser.add_argument("--json", metavar="FILE", help="also write the result as JSON to FILE")
+
+
+def _run_sd_quality(args: argparse.Namespace) -> int:
+    from ecahd_core.bench.sd_quality import evaluate_sd, plot_plans
+    from ecahd_core.maps import load_map
+    from ecahd_core.model_zoo import load_model, sample_steps
+    from ecahd_core.problems import make_problems
+
+    grid = load_map(args.map)
+    ckpt = load_model("sd", grid, path=args.sd, horizon=10)
+    problems = make_problems(grid, args.problems, seed=args.seed)
+    steps = args.steps or sample_steps(ckpt)
+    metrics, plans = evaluate_sd(ckpt, grid, problems, num_steps=steps, eta=args.eta,
+                                 seed=args.sample_seed)
+    print(f"SD alone (unguided, 1 sample) on {grid.name}: {metrics.problems} problems "
+          f"(seed {args.seed}), {steps} DDIM steps, eta {args.eta}")
+    print(f"  a waypoint within 1.0 m of the goal: {100 * metrics.goal_reached:.1f}%  (target >= 85%)")
+    print(f"  collision-free for a point robot:    {100 * metrics.collision_free_point:.1f}%  "
+          f"(target >= 80%)")
+    print(f"  mean length / A* length:             {metrics.mean_length_ratio:.3f}")
+    print(f"  sampling all {metrics.problems} in one batch: {metrics.sample_ms:.0f} ms")
+    if args.png:
+        plot_plans(grid, problems[:8], plans[:8], args.png)
+        print(f"figure: {args.png}")
+    if args.json:
+        _write_json(args.json, metrics.to_dict())
+    return 0
+
+
 BENCHMARKS: dict[str, Benchmark] = {
     "cost": Benchmark(help="forward+backward time of the cost J: batched torch vs literal loops",
                       add_arguments=_add_cost_arguments, run=_run_cost),
+    "sampling": Benchmark(help="latency of SD / DD / FD sampling next to the paper's A100 figures",
+                          add_arguments=_add_sampling_arguments, run=_run_sampling),
+    "sd-quality": Benchmark(help="SD alone: goal reach and point-robot collision-free rate",
+                            add_arguments=_add_sd_quality_arguments, run=_run_sd_quality),
 }
 
 

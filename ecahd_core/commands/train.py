@@ -1,0 +1,137 @@
+"""``ecahd train {sd,dd,fd}`` and ``ecahd train-all``: train the diffusion models of a map.
+
+    ecahd train sd --data data/large.npz --out runs/train/sd.pt
+    ecahd train-all --map maze2d-large          # dataset + SD + DD + FD, seeded, into the package
+
+Defaults come from ``ecahd_core.model_zoo.RECIPES``; ``--device cuda`` trains on a GPU, and the
+same command under ``torchrun --nproc_per_node N`` trains with DistributedDataParallel.
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import time
+from pathlib import Path
+
+log = logging.getLogger("ecahd.train")
+
+
+def _add_common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--seed", type=int, default=0, help="seed of weights and every random draw")
+    p.add_argument("--device", default="cpu", help="cpu, cuda, cuda:1, ...")
+    p.add_argument("--steps-scale", type=float, default=1.0,
+                   help="multiply every recipe's step count (and warm-up) by this")
+    p.add_argument("--threads", type=int, default=0,
+                   help="torch CPU threads (0: torch's default)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("kind", choices=("sd", "dd", "fd"), help="which model")
+    p.add_argument("--data", required=True, help="expert dataset (.npz from `ecahd dataset`)")
+    p.add_argument("--out", required=True, help="checkpoint to write (with training state)")
+    p.add_argument("--steps", type=int, default=None, help="optimiser steps (default: recipe)")
+    p.add_argument("--batch-size", type=int, default=None, help="batch (default: recipe)")
+    p.add_argument("--warmup", type=int, default=None, help="LR warm-up steps (default: recipe)")
+    p.add_argument("--resume", default=None, help="continue from this checkpoint")
+    p.add_argument("--ship", default=None,
+                   help="also write an inference-only copy here (what the package ships)")
+    _add_common(p)
+
+
+def add_all_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--map", default="maze2d-large", help="built-in maze or Nav2 map YAML")
+    p.add_argument("--robot", default="circle",
+                   help="footprint whose clearance the expert A* paths keep")
+    p.add_argument("--pairs", type=int, default=5000, help="expert start/goal pairs")
+    p.add_argument("--kinds", nargs="+", default=["sd", "dd", "fd"], choices=("sd", "dd", "fd"))
+    p.add_argument("--work-dir", default="runs/train",
+                   help="dataset and full checkpoints (resumable) go here")
+    p.add_argument("--out-dir", default=None,
+                   help="inference-only models go here (default: the package's models folder)")
+    _add_common(p)
+
+
+def train_one(kind: str, dataset, *, out: Path, seed: int, device: str, steps: int | None = None,
+              batch_size: int | None = None, warmup: int | None = None,
+              steps_scale: float = 1.0, resume: str | None = None, ship: Path | None = None,
+              progress: bool = True):
+    """Train one model kind on an ExpertDataset; returns the TrainResult."""
+    from ecahd_core.diffusion import DenoiserConfig, Normalizer, TrainConfig, train
+    from ecahd_core.model_zoo import model_meta, recipe, training_arrays
+
+    r = recipe(kind)
+    arrays = training_arrays(kind, dataset)
+    steps = steps or max(1, int(round(r.steps * steps_scale)))
+    warmup = warmup if warmup is not None else int(round(r.warmup_steps * min(1.0, steps_scale)))
+    config = DenoiserConfig(max_horizon=max(arrays), d_model=r.d_model, n_layers=r.n_layers,
+                            n_heads=r.n_heads)
+    tc = TrainConfig(steps=steps, batch_size=batch_size or r.batch_size, warmup_steps=warmup,
+                     ema_decay=r.ema_decay, seed=seed, device=device,
+                     log_every=max(1, min(100, steps // 20)))
+    normalizer = Normalizer.from_bounds(*dataset.grid().bounds)
+    n = sum(len(a) for a in arrays.values())
+    log.info("training %s: %d trajectories, horizons %s, %d steps x batch %d on %s",
+             kind, n, sorted(arrays), tc.steps, tc.batch_size, device)
+    result = train(config, arrays, normalizer, tc, kind=kind, out_path=out,
+                   meta=model_meta(kind, dataset), resume_from=resume, progress=progress)
+    if ship is not None and result.checkpoint is not None:
+        result.checkpoint.save(ship, include_training_state=False)
+        log.info("inference-only model: %s (%.1f MB)", ship, ship.stat().st_size / 1e6)
+    return result
+
+
+def _set_threads(n: int) -> None:
+    if n > 0:
+        import torch
+
+        torch.set_num_threads(n)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ecahd_core.dataset import ExpertDataset
+
+    _set_threads(args.threads)
+    dataset = ExpertDataset.load(args.data)
+    t0 = time.perf_counter()
+    result = train_one(args.kind, dataset, out=Path(args.out), seed=args.seed, device=args.device,
+                       steps=args.steps, batch_size=args.batch_size, warmup=args.warmup,
+                       steps_scale=args.steps_scale, resume=args.resume,
+                       ship=Path(args.ship) if args.ship else None,
+                       progress=not args.no_progress)
+    last = result.loss_history[-1][1] if result.loss_history else float("nan")
+    print(f"trained {args.kind}: {result.step} steps in {time.perf_counter() - t0:.0f} s, "
+          f"final loss {last:.4f} -> {result.path}")
+    return 0
+
+
+def run_all(args: argparse.Namespace) -> int:
+    from ecahd_core.dataset import generate_dataset
+    from ecahd_core.maps import load_map
+    from ecahd_core.model_zoo import MODELS_DIR, shipped_path
+
+    _set_threads(args.threads)
+    work = Path(args.work_dir)
+    work.mkdir(parents=True, exist_ok=True)
+    grid = load_map(args.map)
+    out_dir = Path(args.out_dir) if args.out_dir else MODELS_DIR
+    t_start = time.perf_counter()
+    data_path = work / f"{grid.name}_{args.robot}_{args.pairs}_s{args.seed}.npz"
+    dataset = generate_dataset(grid, pairs=args.pairs, seed=args.seed, footprint_spec=args.robot,
+                               progress=not args.no_progress)
+    dataset.save(data_path)
+    times = {"dataset": time.perf_counter() - t_start}
+    print(f"dataset: {dataset.num_pairs} pairs -> {data_path} ({times['dataset']:.0f} s)")
+    for kind in args.kinds:
+        t0 = time.perf_counter()
+        ship = out_dir / shipped_path(grid.name, kind).name
+        result = train_one(kind, dataset, out=work / f"{grid.name}_{kind}.pt", seed=args.seed,
+                           device=args.device, steps_scale=args.steps_scale, ship=ship,
+                           progress=not args.no_progress)
+        times[kind] = time.perf_counter() - t0
+        last = result.loss_history[-1][1] if result.loss_history else float("nan")
+        print(f"{kind}: {result.step} steps, final loss {last:.4f}, {times[kind]:.0f} s -> {ship}")
+    total = time.perf_counter() - t_start
+    print("wall time: " + ", ".join(f"{k} {v:.0f} s" for k, v in times.items())
+          + f"; total {total / 60:.1f} min")
+    return 0

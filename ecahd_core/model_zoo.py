@@ -1,0 +1,154 @@
+"""The trained models: training recipes (one place for each default), the data each model learns
+from, the identity recorded in a checkpoint, and loading a model for a map and robot.
+
+Shipped models live in ``ecahd_core/models/<map>_<kind>.pt`` (inference-only checkpoints) and
+are reproduced from scratch by ``ecahd train-all --map <map>`` (seeded).
+
+Kinds (paper Sec. III-B, IV-A):
+- ``sd``  Sparse Diffusion: global paths of 2..P^g = 10 waypoints, start and goal inpainted.
+- ``dd``  Dense Diffusion: local segments of P^l = 4 points between two sparse waypoints.
+- ``fd``  Full-sequence Diffusion (Diffuser-style baseline): 100 points start to goal.
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ecahd_core.errors import CheckpointError
+
+log = logging.getLogger(__name__)
+
+MODELS_DIR = Path(__file__).resolve().parent / "models"
+KINDS = ("sd", "dd", "fd")
+
+
+@dataclass(frozen=True, kw_only=True)
+class ModelRecipe:
+    """Architecture and training budget of one model kind.
+
+    Attributes:
+        d_model, n_layers, n_heads: Transformer size (Fig. 2a).
+        steps, batch_size, warmup_steps: optimiser budget (AdamW lr 1e-4 as the paper).
+        ema_decay: EMA of the sampling weights.
+        sample_steps: DDIM steps used when sampling (recorded in the checkpoint; K = 100
+            training steps).
+    """
+
+    d_model: int
+    n_layers: int
+    n_heads: int = 4
+    steps: int
+    batch_size: int
+    warmup_steps: int
+    ema_decay: float = 0.999
+    sample_steps: int = 10
+
+
+# Sized so that all three train on a 2-core CPU in about 25 minutes (docs/RESULTS.md) and
+# sample within the latency targets of `ecahd bench sampling`.
+RECIPES: dict[str, ModelRecipe] = {
+    "sd": ModelRecipe(d_model=128, n_layers=4, steps=6000, batch_size=256, warmup_steps=500),
+    "dd": ModelRecipe(d_model=96, n_layers=2, steps=4000, batch_size=256, warmup_steps=300),
+    "fd": ModelRecipe(d_model=96, n_layers=3, steps=2500, batch_size=64, warmup_steps=250),
+}
+
+
+def recipe(kind: str) -> ModelRecipe:
+    if kind not in RECIPES:
+        raise CheckpointError(f"unknown model kind {kind!r}; allowed: {list(KINDS)}")
+    return RECIPES[kind]
+
+
+def training_arrays(kind: str, dataset) -> dict[int, np.ndarray]:
+    """The expert trajectories a model learns from: {horizon: (N, h, 2) [m]}.
+
+    SD learns every horizon 2..P^g that Algorithm 1's shrinking horizon asks for, from two views
+    of each expert path: the remaining path after the robot advanced (``sparse_h``, evenly spaced
+    suffixes) and the whole path resampled to h points (other spacings, same start-goal
+    distribution). DD learns the P^l-point local segments, FD the 100-point sequences.
+    """
+    from ecahd_core.dataset import resample_by_arclength
+
+    if kind == "sd":
+        arrays = {}
+        for h, suffix in sorted(dataset.sparse_h.items()):
+            whole = np.stack([resample_by_arclength(p, h) for p in dataset.full]).astype(np.float32)
+            arrays[int(h)] = np.concatenate([suffix, whole]).astype(np.float32)
+        return arrays
+    if kind == "dd":
+        return {int(dataset.dense.shape[1]): dataset.dense.astype(np.float32)}
+    if kind == "fd":
+        return {int(dataset.full.shape[1]): dataset.full.astype(np.float32)}
+    raise CheckpointError(f"unknown model kind {kind!r}; allowed: {list(KINDS)}")
+
+
+def model_meta(kind: str, dataset) -> dict[str, Any]:
+    """Identity recorded in a checkpoint and checked when it is loaded (plus the DDIM step
+    count to sample it with)."""
+    return {
+        "sample_steps": int(recipe(kind).sample_steps),
+        "map_name": dataset.map_name,
+        "map_fingerprint": dataset.map_fingerprint,
+        "robot": dataset.params.get("footprint_spec"),
+        "clearance": float(dataset.params.get("clearance")),
+        "dataset_sha256": dataset.sha256,
+        "dataset_pairs": int(dataset.num_pairs),
+        "seed": int(dataset.params.get("seed", 0)),
+    }
+
+
+def shipped_path(map_name: str, kind: str) -> Path:
+    """Where the package keeps the model of ``kind`` for ``map_name``."""
+    return MODELS_DIR / f"{map_name}_{kind}.pt"
+
+
+def load_model(kind: str, grid, *, path: str | Path | None = None, footprint=None,
+               horizon: int | None = None, device: str = "cpu"):
+    """Load a checkpoint for ``grid`` and check it fits the request.
+
+    Args:
+        kind: "sd", "dd" or "fd".
+        grid: the GridMap the model will plan on (its name and fingerprint must match).
+        path: a checkpoint file; default: the shipped model for ``grid.name``.
+        footprint: the robot; its circumscribed radius must not exceed the clearance the
+            expert data was planned with.
+        horizon: a trajectory length the caller will sample; must be one the model learnt.
+    Returns:
+        the :class:`~ecahd_core.diffusion.training.Checkpoint` (``.build_model()``,
+        ``.build_scheduler()``, ``.normalizer``).
+    Raises:
+        CheckpointError naming the mismatch.
+    """
+    from ecahd_core.diffusion.training import load_checkpoint
+
+    if kind not in KINDS:
+        raise CheckpointError(f"unknown model kind {kind!r}; allowed: {list(KINDS)}")
+    if path is None:
+        path = shipped_path(grid.name, kind)
+        if not path.is_file():
+            shipped = sorted(p.stem for p in MODELS_DIR.glob("*.pt"))
+            raise CheckpointError(f"no shipped {kind!r} model for map {grid.name!r} (shipped: "
+                                  f"{shipped}); train one with `ecahd train-all --map ...`")
+    ckpt = load_checkpoint(path, expect={"kind": kind, "map_name": grid.name,
+                                         "map_fingerprint": grid.fingerprint()},
+                           map_location=device)
+    if footprint is not None:
+        clearance = float(ckpt.meta.get("clearance", 0.0))
+        if footprint.circumscribed_radius > clearance + 1e-6:
+            raise CheckpointError(
+                f"checkpoint '{path}' was trained on expert paths with {clearance:.3f} m "
+                f"clearance (robot {ckpt.meta.get('robot')!r}); robot {footprint.name!r} needs "
+                f"{footprint.circumscribed_radius:.3f} m: train a model for this robot")
+    if horizon is not None and int(horizon) not in ckpt.horizons:
+        raise CheckpointError(f"checkpoint '{path}' ({kind}) was trained for horizons "
+                              f"{list(ckpt.horizons)}, not {horizon}")
+    return ckpt
+
+
+def sample_steps(checkpoint) -> int:
+    """The DDIM step count a checkpoint is meant to be sampled with."""
+    return int(checkpoint.meta.get("sample_steps", RECIPES[checkpoint.kind].sample_steps))

@@ -1,0 +1,116 @@
+"""Training recipes, the train commands, checkpoint identity checks, best-of-N selection."""
+import numpy as np
+import pytest
+
+from ecahd_core.dataset import ExpertDataset, generate_dataset
+from ecahd_core.errors import CheckpointError, EcahdError
+from ecahd_core.footprint import make_footprint
+from ecahd_core.maps import builtin_map
+from ecahd_core.model_zoo import RECIPES, load_model, model_meta, training_arrays
+from ecahd_core.planner import select_best
+from ecahd_ros.cli import main
+
+
+@pytest.fixture(scope="module")
+def umaze_data(tmp_path_factory):
+    path = tmp_path_factory.mktemp("data") / "umaze.npz"
+    ds = generate_dataset(builtin_map("maze2d-umaze"), pairs=12, seed=3, min_distance=1.5,
+                          progress=False)
+    ds.save(path)
+    return ExpertDataset.load(path), path
+
+
+@pytest.fixture(scope="module")
+def tiny_sd(umaze_data, tmp_path_factory):
+    _, data = umaze_data
+    out = tmp_path_factory.mktemp("ckpt") / "sd.pt"
+    ship = out.with_name("sd_ship.pt")
+    assert main(["train", "sd", "--data", str(data), "--out", str(out), "--ship", str(ship),
+                 "--steps", "3", "--batch-size", "8", "--warmup", "1", "--no-progress"]) == 0
+    return out, ship
+
+
+def test_training_arrays_views(umaze_data):
+    ds, _ = umaze_data
+    sd = training_arrays("sd", ds)
+    assert sorted(sd) == list(range(2, 11))
+    for h, arr in sd.items():
+        # suffix view + whole-path view, both start-to-goal of h points
+        assert arr.shape == (2 * ds.num_pairs, h, 2)
+        assert np.allclose(arr[ds.num_pairs:, 0], ds.starts, atol=1e-5)
+        assert np.allclose(arr[:, -1], np.concatenate([ds.goals, ds.goals]), atol=1e-5)
+    assert training_arrays("dd", ds)[4].shape == (9 * ds.num_pairs, 4, 2)
+    assert training_arrays("fd", ds)[100].shape == (ds.num_pairs, 100, 2)
+    with pytest.raises(CheckpointError, match="unknown model kind"):
+        training_arrays("xd", ds)
+
+
+def test_meta_records_identity(umaze_data):
+    ds, _ = umaze_data
+    meta = model_meta("sd", ds)
+    assert meta["map_name"] == "maze2d-umaze" and meta["dataset_sha256"] == ds.sha256
+    assert meta["clearance"] == pytest.approx(0.4) and meta["sample_steps"] == RECIPES["sd"].sample_steps
+
+
+def test_train_command_writes_full_and_shipped_checkpoints(tiny_sd):
+    out, ship = tiny_sd
+    grid = builtin_map("maze2d-umaze")
+    full = load_model("sd", grid, path=out)
+    shipped = load_model("sd", grid, path=ship)
+    assert full.training_state is not None and shipped.training_state is None
+    assert ship.stat().st_size < out.stat().st_size
+    assert full.step == 3
+
+
+def test_resume_continues(tiny_sd, umaze_data, tmp_path):
+    out, _ = tiny_sd
+    _, data = umaze_data
+    more = tmp_path / "sd5.pt"
+    assert main(["train", "sd", "--data", str(data), "--out", str(more), "--resume", str(out),
+                 "--steps", "5", "--batch-size", "8", "--warmup", "1", "--no-progress"]) == 0
+    assert load_model("sd", builtin_map("maze2d-umaze"), path=more).step == 5
+
+
+def test_wrong_map_robot_horizon_raise(tiny_sd):
+    _, ship = tiny_sd
+    with pytest.raises(CheckpointError, match="trained for map 'maze2d-umaze'"):
+        load_model("sd", builtin_map("maze2d-medium"), path=ship)
+    with pytest.raises(CheckpointError, match="not 'dd'|is a 'sd' model"):
+        load_model("dd", builtin_map("maze2d-umaze"), path=ship)
+    big = make_footprint("circle", radius=0.45)
+    with pytest.raises(CheckpointError, match="0.400 m clearance"):
+        load_model("sd", builtin_map("maze2d-umaze"), path=ship, footprint=big)
+    with pytest.raises(CheckpointError, match="horizons"):
+        load_model("sd", builtin_map("maze2d-umaze"), path=ship, horizon=12)
+    # smaller robots are fine
+    load_model("sd", builtin_map("maze2d-umaze"), path=ship, footprint=make_footprint("humanoid"),
+               horizon=10)
+
+
+def test_missing_or_corrupt_checkpoint(tmp_path):
+    with pytest.raises(CheckpointError, match="no shipped 'sd' model for map 'maze2d-umaze'"):
+        load_model("sd", builtin_map("maze2d-umaze"))
+    bad = tmp_path / "bad.pt"
+    bad.write_bytes(b"not a checkpoint")
+    with pytest.raises(CheckpointError, match="cannot read"):
+        load_model("sd", builtin_map("maze2d-umaze"), path=bad)
+
+
+def test_select_best_paper_rule():
+    goal = np.array([5.0, 0.0])
+    # 0: reaches the goal (ends at it), length 5 + a detour of 2 -> 7
+    # 1: reaches, straight, length 5
+    # 2: shortest (length 1) but ends 4 m from the goal: not reaching
+    c = np.array([
+        [[0, 0], [0, 1], [5, 1], [5, 0]],
+        [[0, 0], [2, 0], [4, 0], [5, 0]],
+        [[0, 0], [0.5, 0], [0.75, 0], [1, 0]],
+    ], dtype=float)
+    assert select_best(c, goal) == 1
+    # none reaches (goal far away): the shortest overall
+    assert select_best(c, np.array([50.0, 50.0])) == 2
+    # collision-aware: candidate 1 collides, 0 does not -> 0 despite being longer
+    assert select_best(c, goal, rule="collision_aware",
+                       collision_costs=np.array([0.0, 3.0, 0.0])) == 0
+    with pytest.raises(EcahdError, match="shortest_reaching"):
+        select_best(c, goal, rule="best")
