@@ -34,6 +34,9 @@ class SparseConfig:
         collision_tolerance: slack on the collision cost for ``collision_aware``.
         num_steps: DDIM steps (None: the checkpoint's).
         eta: DDIM eta.
+        guidance: guide SD itself by J towards G (the "SD with guidance" baseline of Table I;
+            ECAHD leaves SD unguided).
+        guidance_weight: omega when ``guidance``.
     """
 
     num_candidates: int = 10
@@ -43,6 +46,8 @@ class SparseConfig:
     collision_tolerance: float = 0.1
     num_steps: int | None = None
     eta: float = 0.0
+    guidance: bool = False
+    guidance_weight: float = 1.0
 
     def __post_init__(self) -> None:
         if self.selection not in SELECTION_RULES:
@@ -105,7 +110,8 @@ class SparseDiffusion:
     Args:
         checkpoint: a loaded SD checkpoint (``model_zoo.load_model("sd", ...)``).
         config: SparseConfig.
-        cost: optional (costmap, footprint_points, CostConfig) for the collision_aware rule.
+        cost: (costmap, footprint_points, CostConfig) for the collision_aware rule and for
+            guidance (optional otherwise).
         device: where the model runs.
     """
 
@@ -117,7 +123,12 @@ class SparseDiffusion:
         self.config = config or SparseConfig()
         steps = self.config.num_steps or sample_steps(checkpoint)
         self.sampler = DiffusionSampler.from_checkpoint(
-            checkpoint, device=device, config=SamplerConfig(num_steps=steps, eta=self.config.eta))
+            checkpoint, device=device, config=SamplerConfig(
+                num_steps=steps, eta=self.config.eta,
+                guidance_weight=self.config.guidance_weight))
+        if cost is None and (self.config.guidance or self.config.selection == "collision_aware"):
+            raise EcahdError("SD guidance and the collision_aware rule need the cost J "
+                             "(costmap, footprint points, CostConfig)")
         self.cost = cost
 
     def plan(self, start, goal, *, horizon: int | None = None,
@@ -131,11 +142,17 @@ class SparseDiffusion:
         if horizon <= 2:
             cands = torch.stack([start_t, goal_t])[None].expand(cfg.num_candidates, 2, 2)
         else:
+            guide = None
+            if cfg.guidance:
+                from ecahd_core.guidance import CostJGuide
+
+                costmap, fp, cost_config = self.cost
+                guide = CostJGuide(costmap, fp, goal_t[None], cost_config)
             cands = self.sampler.sample(batch=cfg.num_candidates, horizon=horizon,
                                         conditions={0: start_t, -1: goal_t},
-                                        generator=generator).trajectories
+                                        generator=generator, guide=guide).trajectories
         col = None
-        if self.cost is not None:
+        if cfg.selection == "collision_aware":
             from ecahd_core.cost import trajectory_cost
 
             costmap, fp, cost_config = self.cost
@@ -149,3 +166,191 @@ class SparseDiffusion:
                            collision_tolerance=cfg.collision_tolerance)
         return SparsePlan(waypoints=cands_np[best], candidates=cands_np, best=best,
                           collision_costs=col, time_ms=(time.perf_counter() - t0) * 1e3)
+
+
+# ----------------------------------------------------------------------- Algorithms 1 and 2
+@dataclass(frozen=True, kw_only=True)
+class DenseConfig:
+    """Settings of the local stage (Algorithm 1 lines 13-18, Algorithm 2).
+
+    Attributes:
+        points: P^l, points of a local plan (endpoints included).
+        c_th: DD runs when the straight local plan's collision cost exceeds this.
+        enabled: run DD at all (False: follow the straight local plans, "w/o DD").
+        guidance: guide DD by J (ECAHD) or not (HD without guidance).
+        guidance_weight: omega of Algorithm 2 line 5.
+        num_steps: DDIM steps (None: the checkpoint's).
+        eta: DDIM eta.
+        retries: our safety rule, beyond the paper: when the refined segment's collision cost
+            is still above c_th, sample DD again (up to this many times) and keep the segment
+            of lowest cost. 0 is the paper's behaviour.
+    """
+
+    points: int = 4
+    c_th: float = 0.1
+    enabled: bool = True
+    guidance: bool = True
+    guidance_weight: float = 1.0
+    num_steps: int | None = None
+    eta: float = 0.0
+    retries: int = 0
+
+
+@dataclass(frozen=True)
+class HierarchicalPlan:
+    """Result of Algorithm 1 on one problem.
+
+    Attributes:
+        trajectory: (N, 2) [m] the executed dense path (local plans joined end to end).
+        global_plans: the sparse plan t^g_p of every iteration p, each (P^g - p, 2) [m].
+        segments: the local plan t^l_p of every iteration, each (P^l, 2) [m].
+        dd_segments: per iteration, whether DD replaced the straight local plan.
+        local_costs: per iteration, (c^l before DD, c^l after DD or the same).
+        timings_ms: wall time per stage: "sd", "j_check", "dd", "total".
+    """
+
+    trajectory: np.ndarray
+    global_plans: list
+    segments: list
+    dd_segments: list
+    local_costs: list
+    timings_ms: dict
+
+    @property
+    def dd_calls(self) -> int:
+        return int(sum(self.dd_segments))
+
+
+class HierarchicalPlanner:
+    """Algorithm 1 with Algorithm 2's DenseDiffusion, over a whole problem.
+
+    Args:
+        sparse: the SparseDiffusion global planner.
+        dense_checkpoint: the DD checkpoint (None when ``dense.enabled`` is False).
+        costmap, footprint_points, cost_config: the cost J (Algorithm 2 lines 11-25).
+        dense: DenseConfig.
+    """
+
+    def __init__(self, sparse: SparseDiffusion, dense_checkpoint, *, costmap, footprint_points,
+                 cost_config=None, dense: DenseConfig | None = None, device: str = "cpu") -> None:
+        from ecahd_core.cost import CostConfig
+        from ecahd_core.diffusion import DiffusionSampler, SamplerConfig
+        from ecahd_core.model_zoo import sample_steps
+
+        self.sparse = sparse
+        self.dense = dense or DenseConfig()
+        self.cost_config = cost_config or CostConfig()
+        self.costmap = costmap
+        self.footprint_points = torch.as_tensor(footprint_points, dtype=costmap.dtype,
+                                                device=costmap.device)
+        self.dd = None
+        if self.dense.enabled:
+            steps = self.dense.num_steps or sample_steps(dense_checkpoint)
+            self.dd = DiffusionSampler.from_checkpoint(dense_checkpoint, device=device, config=SamplerConfig(
+                num_steps=steps, eta=self.dense.eta, guidance_weight=self.dense.guidance_weight))
+
+    def local_cost(self, segments: torch.Tensor, goals: torch.Tensor) -> torch.Tensor:
+        """J's collision cost c^l of local plans. segments: (B, P^l, 2), goals: (B, 2) -> (B,)."""
+        from ecahd_core.cost import trajectory_cost
+
+        with torch.no_grad():
+            return trajectory_cost(segments.to(self.costmap.dtype), goals.to(self.costmap.dtype),
+                                   self.footprint_points, self.costmap,
+                                   **self.cost_config.cost_kwargs()).collision_cost
+
+    def refine(self, start: torch.Tensor, goal: torch.Tensor, *,
+               generator: torch.Generator | None = None) -> tuple[torch.Tensor, float]:
+        """DenseDiffusion (Algorithm 2 lines 1-9) between two waypoints, with the optional
+        retry rule -> (segment (P^l, 2), its collision cost)."""
+        from ecahd_core.guidance import CostJGuide
+
+        guide = None
+        if self.dense.guidance:
+            guide = CostJGuide(self.costmap, self.footprint_points, goal[None], self.cost_config)
+        best, best_cost = None, float("inf")
+        for _ in range(1 + max(0, self.dense.retries)):
+            seg = self.dd.sample(batch=1, horizon=self.dense.points,
+                                 conditions={0: start, -1: goal}, generator=generator,
+                                 guide=guide).trajectories[0]
+            cost = float(self.local_cost(seg[None], goal[None])[0])
+            if cost < best_cost:
+                best, best_cost = seg, cost
+            if best_cost <= self.dense.c_th:
+                break
+        return best, best_cost
+
+    def plan(self, start, goal, *, generator: torch.Generator | None = None) -> HierarchicalPlan:
+        """Run Algorithm 1 from ``start`` to ``goal`` ((2,) [m] each)."""
+        P_g, P_l = self.sparse.config.horizon, self.dense.points
+        S = torch.as_tensor(np.asarray(start, dtype=np.float32))
+        G = torch.as_tensor(np.asarray(goal, dtype=np.float32))
+        t_total = time.perf_counter()
+        times = {"sd": 0.0, "j_check": 0.0, "dd": 0.0}
+        global_plans, segments, dd_used, costs = [], [], [], []
+        frac = torch.linspace(0.0, 1.0, P_l)[:, None]
+        for p in range(P_g - 1):  # Algorithm 1 line 1 (the last iteration reaches G)
+            t0 = time.perf_counter()
+            g_plan = self.sparse.plan(S.numpy(), G.numpy(), horizon=P_g - p, generator=generator)
+            times["sd"] += (time.perf_counter() - t0) * 1e3
+            wp = torch.as_tensor(g_plan.waypoints, dtype=torch.float32)
+            a, b = wp[0], wp[1]
+            local = a + frac * (b - a)  # LocalPlan(t^g[0], t^g[1]): (P^l, 2)
+            t0 = time.perf_counter()
+            c = float(self.local_cost(local[None], b[None])[0])
+            times["j_check"] += (time.perf_counter() - t0) * 1e3
+            c_after, used = c, False
+            if self.dd is not None and c > self.dense.c_th:  # line 15
+                t0 = time.perf_counter()
+                local, c_after = self.refine(a, b, generator=generator)
+                times["dd"] += (time.perf_counter() - t0) * 1e3
+                used = True
+            global_plans.append(g_plan.waypoints)
+            segments.append(local.numpy().astype(np.float64))
+            dd_used.append(used)
+            costs.append((c, c_after))
+            S = local[-1].clone()  # MoveAgent: the end of the local plan (= t^g[1])
+        traj = np.concatenate([segments[0]] + [s[1:] for s in segments[1:]])
+        times["total"] = (time.perf_counter() - t_total) * 1e3
+        return HierarchicalPlan(trajectory=traj, global_plans=global_plans, segments=segments,
+                                dd_segments=dd_used, local_costs=costs, timings_ms=times)
+
+
+class FullDiffusion:
+    """The Diffuser-style baseline (FD): one 100-point trajectory from start to goal, optionally
+    guided by J over the whole sequence.
+
+    Args:
+        checkpoint: a loaded FD checkpoint.
+        guidance: guide by J (goal distance + swept-footprint collision) at every step.
+        cost: (costmap, footprint_points, CostConfig), needed with guidance.
+        guidance_weight, num_steps, eta: as for SD.
+    """
+
+    def __init__(self, checkpoint, *, guidance: bool = False, cost=None,
+                 guidance_weight: float = 1.0, num_steps: int | None = None, eta: float = 0.0,
+                 device: str = "cpu") -> None:
+        from ecahd_core.diffusion import DiffusionSampler, SamplerConfig
+        from ecahd_core.model_zoo import sample_steps
+
+        if guidance and cost is None:
+            raise EcahdError("FD guidance needs the cost J (costmap, footprint points, CostConfig)")
+        self.horizon = max(checkpoint.horizons)
+        self.guidance, self.cost = guidance, cost
+        self.sampler = DiffusionSampler.from_checkpoint(checkpoint, device=device, config=SamplerConfig(
+            num_steps=num_steps or sample_steps(checkpoint), eta=eta,
+            guidance_weight=guidance_weight))
+
+    def plan(self, start, goal, *, generator: torch.Generator | None = None) -> np.ndarray:
+        """start, goal: (2,) [m] -> (horizon, 2) [m]."""
+        start_t = torch.as_tensor(np.asarray(start, dtype=np.float32))
+        goal_t = torch.as_tensor(np.asarray(goal, dtype=np.float32))
+        guide = None
+        if self.guidance:
+            from ecahd_core.guidance import CostJGuide
+
+            costmap, fp, cost_config = self.cost
+            guide = CostJGuide(costmap, fp, goal_t[None], cost_config)
+        out = self.sampler.sample(batch=1, horizon=self.horizon,
+                                  conditions={0: start_t, -1: goal_t}, generator=generator,
+                                  guide=guide)
+        return out.trajectories[0].numpy().astype(np.float64)

@@ -114,3 +114,14 @@ def test_select_best_paper_rule():
                        collision_costs=np.array([0.0, 3.0, 0.0])) == 0
     with pytest.raises(EcahdError, match="shortest_reaching"):
         select_best(c, goal, rule="best")
+
+
+def test_train_all_tiny(tmp_path):
+    # the whole recipe at a thousandth of its steps on the small maze: dataset + 3 models
+    assert main(["train-all", "--map", "maze2d-umaze", "--pairs", "6", "--steps-scale", "0.001",
+                 "--work-dir", str(tmp_path / "work"), "--out-dir", str(tmp_path / "models"),
+                 "--no-progress"]) == 0
+    grid = builtin_map("maze2d-umaze")
+    for kind in ("sd", "dd", "fd"):
+        ckpt = load_model(kind, grid, path=tmp_path / "models" / f"maze2d-umaze_{kind}.pt")
+        assert ckpt.training_state is None and ckpt.meta["dataset_pairs"] == 6

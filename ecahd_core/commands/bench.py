@@ -159,11 +159,68 @@ def _run_sd_quality(args: argparse.Namespace) -> int:
     return 0
 
 
+# -------------------------------------------------------------------------------- planning
+def _add_planning_arguments(parser: argparse.ArgumentParser) -> None:
+    from ecahd_core.bench.planning import METHODS, ROBOTS, PlanningBenchSettings
+
+    d = PlanningBenchSettings()
+    parser.add_argument("--map", default=d.map, help="built-in maze or Nav2 map YAML")
+    parser.add_argument("--problems", type=_int_at_least(1), default=d.problems, metavar="N",
+                        help="held-out start/goal pairs (>= 3 m apart along the A* path)")
+    parser.add_argument("--seed", type=int, default=d.seed, help="seed of the problems")
+    parser.add_argument("--sample-seed", type=int, default=d.sample_seed, help="sampling seed")
+    parser.add_argument("--robots", nargs="+", default=list(d.robots), choices=ROBOTS)
+    parser.add_argument("--methods", nargs="+", default=list(d.methods), choices=METHODS)
+    parser.add_argument("--candidates", type=_int_at_least(1), default=d.candidates,
+                        help="SD candidates per plan (best of N)")
+    parser.add_argument("--omega", type=float, default=d.guidance_weight, help="guidance weight")
+    parser.add_argument("--c-th", type=float, default=d.c_th, help="DD trigger threshold")
+    parser.add_argument("--dd-retries", type=_int_at_least(0), default=d.dd_retries,
+                        help="our safety rule: resample DD while still colliding (0: paper)")
+    parser.add_argument("--no-ablation", action="store_true", help="skip Table II")
+    parser.add_argument("--threads", type=_int_at_least(0), default=1,
+                        help="torch threads (0: torch's default)")
+    parser.add_argument("--json", metavar="FILE", help="one record per cell")
+    parser.add_argument("--md", metavar="FILE", help="Table I / Table II as markdown")
+    parser.add_argument("--png", metavar="FILE", help="one problem planned by every method")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def _run_planning(args: argparse.Namespace) -> int:
+    from ecahd_core.bench.planning import (PlanningBenchSettings, format_markdown, plot_examples,
+                                           run_planning_benchmark)
+
+    if args.threads:
+        import torch
+
+        torch.set_num_threads(args.threads)
+    settings = PlanningBenchSettings(
+        map=args.map, problems=args.problems, seed=args.seed, sample_seed=args.sample_seed,
+        robots=tuple(args.robots), methods=tuple(args.methods), candidates=args.candidates,
+        guidance_weight=args.omega, c_th=args.c_th, dd_retries=args.dd_retries,
+        ablation=not args.no_ablation)
+    result = run_planning_benchmark(settings, progress=not args.no_progress)
+    md = format_markdown(result)
+    print(md)
+    if args.md:
+        Path(args.md).write_text(md)
+    if args.json:
+        _write_json(args.json, {"context": result.context,
+                                "cells": [c.to_dict() for c in result.cells],
+                                "ablation": [c.to_dict() for c in result.ablation]})
+    if args.png:
+        plot_examples(result, args.png, robot=result.cells[0].robot)
+        print(f"figure: {args.png}")
+    return 0
+
+
 BENCHMARKS: dict[str, Benchmark] = {
     "cost": Benchmark(help="forward+backward time of the cost J: batched torch vs literal loops",
                       add_arguments=_add_cost_arguments, run=_run_cost),
     "sampling": Benchmark(help="latency of SD / DD / FD sampling next to the paper's A100 figures",
                           add_arguments=_add_sampling_arguments, run=_run_sampling),
+    "planning": Benchmark(help="Table I / II: every method x guidance x robot on held-out problems",
+                          add_arguments=_add_planning_arguments, run=_run_planning),
     "sd-quality": Benchmark(help="SD alone: goal reach and point-robot collision-free rate",
                             add_arguments=_add_sd_quality_arguments, run=_run_sd_quality),
 }

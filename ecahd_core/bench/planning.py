@@ -1,0 +1,296 @@
+"""``ecahd bench planning``: the paper's Table I (and Table II's ablation) on our models.
+
+Every method x {without, with guidance} x robot on the same held-out problems
+(``ecahd_core.problems``). Per problem the *executed* path is judged: FD's 100 points, SD's
+waypoints joined by straight lines, HD/ECAHD's local plans joined end to end, A*'s path.
+
+Metrics per cell:
+- ``success``: some point of the path within 1.0 m of the goal (the paper's rule);
+- ``success_final``: the final point within 0.5 m of the goal;
+- ``success_free``: ``success`` and collision-free (what a robot following the path gets);
+- ``collision_free``: fraction of paths the exact checker finds collision-free;
+- ``collision_rate``: mean penetration fraction (share of densely interpolated poses whose
+  footprint overlaps an obstacle), in %;
+- ``length_ratio``: mean path length / A* path length (same clearance-respecting A*);
+- ``time_ms_mean`` / ``time_ms_p95``: planning wall time per problem;
+- ``dd_ratio``: share of local segments where DD fired (HD methods).
+"""
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+METHODS = ("fd", "sd", "hd", "astar")
+ROBOTS = ("circle", "quadruped", "humanoid")
+METHOD_LABELS = {"fd": "FD", "sd": "SD", "hd": "HD", "astar": "A*"}
+
+# Paper Table I (maze2d-large, 128 problems, A100): success %, collision rate %, time s
+PAPER_TABLE_I = {
+    ("fd", False): {"success": {"circle": 91.41, "quadruped": 85.94, "humanoid": 81.25},
+                    "collision_rate": {"circle": 0.06165, "quadruped": 0.07513, "humanoid": 0.08923},
+                    "time_s": 2.762},
+    ("fd", True): {"success": {"circle": 64.84, "quadruped": 69.53, "humanoid": 67.97},
+                   "collision_rate": {"circle": 0.05004, "quadruped": 0.04689, "humanoid": 0.04370},
+                   "time_s": 11.881},
+    ("sd", False): {"success": {"circle": 90.63, "quadruped": 89.84, "humanoid": 85.94},
+                    "collision_rate": {"circle": 0.08646, "quadruped": 0.11323, "humanoid": 0.11358},
+                    "time_s": 1.449},
+    ("sd", True): {"success": {"circle": 83.59, "quadruped": 80.47, "humanoid": 84.38},
+                   "collision_rate": {"circle": 0.03983, "quadruped": 0.04197, "humanoid": 0.04112},
+                   "time_s": 2.443},
+    ("hd", False): {"success": {"circle": 86.72, "quadruped": 87.50, "humanoid": 92.97},
+                    "collision_rate": {"circle": 0.04452, "quadruped": 0.05840, "humanoid": 0.05401},
+                    "time_s": 1.484},
+    ("hd", True): {"success": {"circle": 89.06, "quadruped": 89.06, "humanoid": 84.43},
+                   "collision_rate": {"circle": 0.03365, "quadruped": 0.03516, "humanoid": 0.03534},
+                   "time_s": 1.527},
+}
+# Paper Table II (circle robot): success %, collision rate %
+PAPER_TABLE_II = {("line", False): (89.06, 0.4675), ("line", True): (87.50, 0.4372),
+                  ("surface", False): (94.53, 0.0363), ("surface", True): (98.44, 0.1320)}
+
+
+@dataclass(frozen=True, kw_only=True)
+class PlanningBenchSettings:
+    map: str = "maze2d-large"
+    problems: int = 128
+    seed: int = 2026
+    sample_seed: int = 0
+    robots: tuple[str, ...] = ROBOTS
+    methods: tuple[str, ...] = METHODS
+    candidates: int = 10
+    guidance_weight: float = 1.0
+    c_th: float = 0.1
+    dd_retries: int = 0
+    ablation: bool = True
+
+
+@dataclass
+class CellResult:
+    method: str
+    guidance: bool
+    robot: str
+    success: float
+    success_final: float
+    success_free: float
+    collision_free: float
+    collision_rate: float
+    length_ratio: float
+    time_ms_mean: float
+    time_ms_p95: float
+    dd_ratio: float
+    problems: int
+    variant: str = ""  # Table II: cost mode (+ dilation)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass
+class PlanningBenchResult:
+    cells: list[CellResult]
+    ablation: list[CellResult]
+    examples: dict = field(default_factory=dict)  # (method, guidance, robot) -> first 4 paths
+    problems: list = field(default_factory=list)  # the first 4 problems (for the figures)
+    context: dict = field(default_factory=dict)
+
+
+def _judge(paths, times, dd, problems, footprint, grid, *, method, guidance, robot, variant=""):
+    from ecahd_core.collision import check_collision
+
+    succ, fin, free, pen, ratio, ok_free = [], [], [], [], [], []
+    for path, prob in zip(paths, problems):
+        d = np.linalg.norm(path - prob.goal, axis=1)
+        rep = check_collision(path, footprint, grid)
+        s = bool(d.min() <= 1.0)
+        succ.append(s)
+        fin.append(bool(d[-1] <= 0.5))
+        free.append(rep.collision_free)
+        ok_free.append(s and rep.collision_free)
+        pen.append(rep.penetration_fraction)
+        ratio.append(float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
+                     / max(prob.astar_length, 1e-9))
+    return CellResult(method=method, guidance=guidance, robot=robot, variant=variant,
+                      success=100 * float(np.mean(succ)), success_final=100 * float(np.mean(fin)),
+                      success_free=100 * float(np.mean(ok_free)),
+                      collision_free=100 * float(np.mean(free)),
+                      collision_rate=100 * float(np.mean(pen)),
+                      length_ratio=float(np.mean(ratio)),
+                      time_ms_mean=float(np.mean(times)), time_ms_p95=float(np.percentile(times, 95)),
+                      dd_ratio=float(np.mean(dd)) if dd else 0.0, problems=len(problems))
+
+
+def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = True
+                           ) -> PlanningBenchResult:
+    import torch
+    from tqdm import tqdm
+
+    from ecahd_core.astar import AStarPlanner, clearance_for_footprint
+    from ecahd_core.cost import CostConfig
+    from ecahd_core.footprint import make_footprint
+    from ecahd_core.maps import load_map
+    from ecahd_core.model_zoo import load_model
+    from ecahd_core.planner import (DenseConfig, FullDiffusion, HierarchicalPlanner, SparseConfig,
+                                    SparseDiffusion)
+    from ecahd_core.problems import make_problems
+
+    grid = load_map(settings.map)
+    problems = make_problems(grid, settings.problems, seed=settings.seed)
+    cells, ablation, examples = [], [], {}
+
+    def run_cell(method, guidance, robot, cost_config=None, variant=""):
+        fp = make_footprint(robot)
+        cc = cost_config or CostConfig()
+        cost = (cc.make_costmap(grid), torch.as_tensor(fp.points, dtype=torch.float32), cc)
+        gen = torch.Generator().manual_seed(settings.sample_seed)
+        if method == "astar":
+            astar = AStarPlanner(grid, clearance_for_footprint(fp))
+            plan_fn = lambda s, g: (astar.plan(s, g), None)  # noqa: E731
+        elif method == "fd":
+            fd = FullDiffusion(load_model("fd", grid, footprint=fp), guidance=guidance, cost=cost,
+                               guidance_weight=settings.guidance_weight)
+            plan_fn = lambda s, g: (fd.plan(s, g, generator=gen), None)  # noqa: E731
+        else:
+            sd = SparseDiffusion(load_model("sd", grid, footprint=fp), SparseConfig(
+                num_candidates=settings.candidates, guidance=(method == "sd" and guidance),
+                guidance_weight=settings.guidance_weight), cost=cost)
+            if method == "sd":
+                plan_fn = lambda s, g: (sd.plan(s, g, generator=gen).waypoints, None)  # noqa: E731
+            else:
+                hd = HierarchicalPlanner(sd, load_model("dd", grid, footprint=fp),
+                                         costmap=cost[0], footprint_points=fp.points,
+                                         cost_config=cc, dense=DenseConfig(
+                                             c_th=settings.c_th, guidance=guidance,
+                                             guidance_weight=settings.guidance_weight,
+                                             retries=settings.dd_retries))
+
+                def plan_fn(s, g):
+                    r = hd.plan(s, g, generator=gen)
+                    return r.trajectory, r.dd_segments
+        paths, times, dd = [], [], []
+        label = f"{METHOD_LABELS[method]}{' guided' if guidance else ''} {robot} {variant}".strip()
+        for prob in tqdm(problems, desc=label, disable=not progress, leave=False):
+            t0 = time.perf_counter()
+            path, dd_segs = plan_fn(prob.start, prob.goal)
+            times.append((time.perf_counter() - t0) * 1e3)
+            paths.append(np.asarray(path, dtype=np.float64))
+            if dd_segs is not None:
+                dd.extend(dd_segs)
+        cell = _judge(paths, times, dd, problems, fp, grid, method=method, guidance=guidance,
+                      robot=robot, variant=variant)
+        log.info("%s: success %.1f%%, collision-free %.1f%%, %.0f ms", label, cell.success,
+                 cell.collision_free, cell.time_ms_mean)
+        return cell, paths
+
+    for robot in settings.robots:
+        for method in settings.methods:
+            for guidance in ((False,) if method == "astar" else (False, True)):
+                cell, paths = run_cell(method, guidance, robot)
+                cells.append(cell)
+                examples[(method, guidance, robot)] = paths[:4]
+    if settings.ablation and "hd" in settings.methods:
+        from ecahd_core.footprint import make_footprint as _mf
+
+        radius = _mf("circle").circumscribed_radius
+        for mode in ("point", "line", "surface"):
+            for dilation in (0.0, radius):
+                cc = CostConfig(mode=mode, dilation=dilation)
+                variant = f"{mode}{' + dilation' if dilation else ''}"
+                cell, _ = run_cell("hd", True, "circle", cost_config=cc, variant=variant)
+                ablation.append(cell)
+    context = {"map": grid.name, "problems": len(problems), "seed": settings.seed,
+               "sample_seed": settings.sample_seed, "candidates": settings.candidates,
+               "guidance_weight": settings.guidance_weight, "c_th": settings.c_th,
+               "dd_retries": settings.dd_retries, "torch": torch.__version__,
+               "threads": torch.get_num_threads()}
+    return PlanningBenchResult(cells=cells, ablation=ablation, examples=examples,
+                               problems=problems[:4], context=context)
+
+
+def _fmt(v, nd=1):
+    return "–" if v is None else f"{v:.{nd}f}"
+
+
+def format_markdown(r: PlanningBenchResult) -> str:
+    """Table I layout (ours beside the paper's), the full per-cell table, and Table II."""
+    c = r.context
+    cell = {(x.method, x.guidance, x.robot): x for x in r.cells}
+    robots = [rb for rb in ROBOTS if any(k[2] == rb for k in cell)]
+    cols = [(m, g) for m in ("fd", "sd", "hd") for g in (False, True) if (m, g, robots[0]) in cell]
+    head = " | ".join(f"{METHOD_LABELS[m]} {'✓' if g else '×'}" + (" (ECAHD)" if (m, g) == ("hd", True) else "")
+                      for m, g in cols)
+    lines = [f"Planning on {c['map']}: {c['problems']} held-out problems (seed {c['seed']}), "
+             f"sampling seed {c['sample_seed']}, best of {c['candidates']} SD candidates, "
+             f"omega {c['guidance_weight']}, c_th {c['c_th']}, DD retries {c['dd_retries']}, "
+             f"torch {c['torch']} with {c['threads']} thread(s). Each cell: ours / paper.", "",
+             f"| metric | robot | {head} |", "|---|---|" + "---|" * len(cols)]
+
+    def row(metric, key, nd, paper_key):
+        for rb in robots:
+            vals = []
+            for m, g in cols:
+                ours = getattr(cell[(m, g, rb)], key)
+                paper = PAPER_TABLE_I.get((m, g), {}).get(paper_key, {})
+                paper = paper.get(rb) if isinstance(paper, dict) else None
+                vals.append(f"{_fmt(ours, nd)} / {_fmt(paper, nd)}")
+            lines.append(f"| {metric} | {rb} | " + " | ".join(vals) + " |")
+
+    row("Success (%) ↑", "success", 1, "success")
+    row("Collision rate (%) ↓", "collision_rate", 4, "collision_rate")
+    times = []
+    for m, g in cols:
+        ours = np.mean([cell[(m, g, rb)].time_ms_mean for rb in robots]) / 1e3
+        times.append(f"{ours:.3f} / {PAPER_TABLE_I[(m, g)]['time_s']:.3f}")
+    lines.append("| Inference time (s) ↓ | mean | " + " | ".join(times) + " |")
+    lines += ["", "All cells (A* is the classical reference; `success_free` = reaches the goal "
+              "and is collision-free):", "",
+              "| method | guidance | robot | success % | final ≤0.5 m % | success & free % | "
+              "collision-free % | collision rate % | length / A* | time mean ms | time p95 ms | DD ratio |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for x in r.cells:
+        lines.append(f"| {METHOD_LABELS[x.method]} | {'✓' if x.guidance else '×'} | {x.robot} | "
+                     f"{x.success:.1f} | {x.success_final:.1f} | {x.success_free:.1f} | "
+                     f"{x.collision_free:.1f} | {x.collision_rate:.4f} | {x.length_ratio:.3f} | "
+                     f"{x.time_ms_mean:.1f} | {x.time_ms_p95:.1f} | {x.dd_ratio:.3f} |")
+    if r.ablation:
+        lines += ["", "Table II ablation (ECAHD, circle robot): how J reads the cost map. "
+                  "Ours / paper.", "",
+                  "| variant | success % | success & free % | collision-free % | collision rate % | DD ratio |",
+                  "|---|---|---|---|---|---|"]
+        for x in r.ablation:
+            mode, dil = x.variant.split(" + ")[0], "dilation" in x.variant
+            ps, pc = PAPER_TABLE_II.get((mode, dil), (None, None))
+            lines.append(f"| {x.variant} | {x.success:.1f} / {_fmt(ps, 2)} | {x.success_free:.1f} | "
+                         f"{x.collision_free:.1f} | {x.collision_rate:.4f} / {_fmt(pc, 4)} | "
+                         f"{x.dd_ratio:.3f} |")
+    return "\n".join(lines) + "\n"
+
+
+def plot_examples(r: PlanningBenchResult, path, *, robot: str = "circle", problem: int = 0) -> None:
+    """One problem, every method (Fig. 3 style): path in purple, collisions in red."""
+    from ecahd_core.collision import check_collision
+    from ecahd_core.footprint import make_footprint
+    from ecahd_core.maps import load_map
+    from ecahd_core.viz import PlanFigure, save_figures
+
+    grid = load_map(r.context["map"])
+    fp = make_footprint(robot)
+    prob = r.problems[problem]
+    figures = []
+    for (method, guidance, rb), paths in r.examples.items():
+        if rb != robot:
+            continue
+        p = paths[problem]
+        rep = check_collision(p, fp, grid)
+        step = max(1, len(rep.dense_poses) // 40)
+        figures.append(PlanFigure(
+            grid=grid, footprint=fp, start=prob.start, goal=prob.goal, trajectory=p,
+            sweep_poses=rep.dense_poses[::step], colliding_poses=rep.dense_poses[rep.colliding][::4],
+            title=f"{METHOD_LABELS[method]}{' + guidance' if guidance else ''}: "
+                  f"{'collision-free' if rep.collision_free else 'collides'}"))
+    save_figures(figures, path, cols=4, panel_size=4.0)

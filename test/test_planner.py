@@ -1,0 +1,56 @@
+"""Algorithm 1 with the shipped models: the executed path joins start to goal, DD runs exactly
+when the straight local plan's collision cost exceeds c_th."""
+import numpy as np
+import pytest
+import torch
+
+from ecahd_core.cost import CostConfig
+from ecahd_core.footprint import make_footprint
+from ecahd_core.maps import builtin_map
+from ecahd_core.model_zoo import load_model
+from ecahd_core.planner import DenseConfig, HierarchicalPlanner, SparseConfig, SparseDiffusion
+
+GRID = builtin_map("maze2d-large")
+
+
+def make_planner(c_th=0.1, enabled=True, robot="circle"):
+    fp = make_footprint(robot)
+    cc = CostConfig()
+    sd = SparseDiffusion(load_model("sd", GRID, footprint=fp), SparseConfig(num_candidates=4))
+    return HierarchicalPlanner(sd, load_model("dd", GRID, footprint=fp),
+                               costmap=cc.make_costmap(GRID), footprint_points=fp.points,
+                               cost_config=cc, dense=DenseConfig(c_th=c_th, enabled=enabled))
+
+
+def test_algorithm1_reaches_goal_in_pg_iterations():
+    planner = make_planner()
+    start, goal = np.array([1.5, 1.5]), np.array([10.5, 7.5])
+    plan = planner.plan(start, goal, generator=torch.Generator().manual_seed(0))
+    P_g = planner.sparse.config.horizon
+    assert len(plan.segments) == P_g - 1
+    assert [len(g) for g in plan.global_plans] == list(range(P_g, 1, -1))  # shrinking horizon
+    assert np.allclose(plan.trajectory[0], start) and np.allclose(plan.trajectory[-1], goal, atol=1e-5)
+    # consecutive local plans are joined end to start
+    for a, b in zip(plan.segments, plan.segments[1:]):
+        assert np.allclose(a[-1], b[0])
+    assert set(plan.timings_ms) == {"sd", "j_check", "dd", "total"}
+
+
+@pytest.mark.parametrize("c_th", [0.1, 1e9])
+def test_dd_runs_only_above_threshold(c_th):
+    planner = make_planner(c_th=c_th)
+    calls = []
+    original = planner.refine
+
+    def counting_refine(*a, **k):
+        calls.append(1)
+        return original(*a, **k)
+
+    planner.refine = counting_refine
+    plan = planner.plan(np.array([1.5, 1.5]), np.array([6.5, 5.5]),
+                        generator=torch.Generator().manual_seed(1))
+    above = [c > c_th for c, _ in plan.local_costs]
+    assert plan.dd_segments == above
+    assert len(calls) == sum(above) == plan.dd_calls
+    if c_th > 1e8:
+        assert plan.dd_calls == 0
