@@ -360,8 +360,8 @@ def _check_goal(goal, traj: torch.Tensor) -> torch.Tensor:
     B = traj.shape[0]
     if g.shape == (2,):
         g = g[None]
-    elif g.shape != (B, 2):
-        raise TrajectoryError(f"goal must have shape (2,) or (B, 2) = ({B}, 2), "
+    elif g.shape not in ((B, 2), (1, 2)):
+        raise TrajectoryError(f"goal must have shape (2,), (1, 2) or (B, 2) = ({B}, 2), "
                               f"got {tuple(g.shape)}")
     if not bool(torch.isfinite(g).all()):
         raise TrajectoryError("goal has non-finite (NaN or inf) coordinates")

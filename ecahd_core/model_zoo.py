@@ -51,7 +51,7 @@ class ModelRecipe:
 # Sized so that all three train on a 2-core CPU in about 25 minutes (docs/RESULTS.md) and
 # sample within the latency targets of `ecahd bench sampling`.
 RECIPES: dict[str, ModelRecipe] = {
-    "sd": ModelRecipe(d_model=128, n_layers=4, steps=6000, batch_size=256, warmup_steps=500),
+    "sd": ModelRecipe(d_model=128, n_layers=4, steps=12000, batch_size=256, warmup_steps=500),
     "dd": ModelRecipe(d_model=96, n_layers=2, steps=4000, batch_size=256, warmup_steps=300),
     "fd": ModelRecipe(d_model=96, n_layers=3, steps=2500, batch_size=64, warmup_steps=250),
 }

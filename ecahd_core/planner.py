@@ -33,7 +33,9 @@ class SparseConfig:
         selection: one of SELECTION_RULES.
         collision_tolerance: slack on the collision cost for ``collision_aware``.
         num_steps: DDIM steps (None: the checkpoint's).
-        eta: DDIM eta.
+        eta: DDIM eta. 1.0 (stochastic, DDPM-like) by default: on 128 held-out problems the
+            shipped SD's single unguided samples were collision-free for a point robot 87.5% of
+            the time with eta 1 vs 82.8% with eta 0 at 10 steps (docs/RESULTS.md).
         guidance: guide SD itself by J towards G (the "SD with guidance" baseline of Table I;
             ECAHD leaves SD unguided).
         guidance_weight: omega when ``guidance``.
@@ -45,7 +47,7 @@ class SparseConfig:
     selection: str = "shortest_reaching"
     collision_tolerance: float = 0.1
     num_steps: int | None = None
-    eta: float = 0.0
+    eta: float = 1.0
     guidance: bool = False
     guidance_weight: float = 1.0
 
@@ -147,7 +149,7 @@ class SparseDiffusion:
                 from ecahd_core.guidance import CostJGuide
 
                 costmap, fp, cost_config = self.cost
-                guide = CostJGuide(costmap, fp, goal_t[None], cost_config)
+                guide = CostJGuide(costmap, fp, goal_t, cost_config)
             cands = self.sampler.sample(batch=cfg.num_candidates, horizon=horizon,
                                         conditions={0: start_t, -1: goal_t},
                                         generator=generator, guide=guide).trajectories
@@ -184,6 +186,8 @@ class DenseConfig:
         retries: our safety rule, beyond the paper: when the refined segment's collision cost
             is still above c_th, sample DD again (up to this many times) and keep the segment
             of lowest cost. 0 is the paper's behaviour.
+        guide_last: guide only the last this-many DDIM steps (None: every step, as Alg. 2).
+        max_guide_norm: cap of the per-waypoint guidance gradient (see diffusion.sampler).
     """
 
     points: int = 4
@@ -194,6 +198,8 @@ class DenseConfig:
     num_steps: int | None = None
     eta: float = 0.0
     retries: int = 0
+    guide_last: int | None = None
+    max_guide_norm: float | None = 1.0
 
 
 @dataclass(frozen=True)
@@ -247,7 +253,8 @@ class HierarchicalPlanner:
         if self.dense.enabled:
             steps = self.dense.num_steps or sample_steps(dense_checkpoint)
             self.dd = DiffusionSampler.from_checkpoint(dense_checkpoint, device=device, config=SamplerConfig(
-                num_steps=steps, eta=self.dense.eta, guidance_weight=self.dense.guidance_weight))
+                num_steps=steps, eta=self.dense.eta, guidance_weight=self.dense.guidance_weight,
+                guide_last=self.dense.guide_last, max_guide_norm=self.dense.max_guide_norm))
 
     def local_cost(self, segments: torch.Tensor, goals: torch.Tensor) -> torch.Tensor:
         """J's collision cost c^l of local plans. segments: (B, P^l, 2), goals: (B, 2) -> (B,)."""
@@ -349,7 +356,7 @@ class FullDiffusion:
             from ecahd_core.guidance import CostJGuide
 
             costmap, fp, cost_config = self.cost
-            guide = CostJGuide(costmap, fp, goal_t[None], cost_config)
+            guide = CostJGuide(costmap, fp, goal_t, cost_config)
         out = self.sampler.sample(batch=1, horizon=self.horizon,
                                   conditions={0: start_t, -1: goal_t}, generator=generator,
                                   guide=guide)

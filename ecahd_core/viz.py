@@ -62,6 +62,7 @@ class PlanFigure:
     sweep_poses: np.ndarray | None = None  # (M, 3) poses whose footprint outline is drawn
     colliding_poses: np.ndarray | None = None  # (C, 3) poses in collision (drawn in red)
     extra_paths: list[np.ndarray] = field(default_factory=list)  # e.g. rejected candidates
+    legend: bool = True
 
     def draw(self, ax) -> None:
         draw_map(ax, self.grid)
@@ -86,7 +87,8 @@ class PlanFigure:
             ax.plot(*self.goal, marker="*", color="gold", mec="k", ms=14, label="goal")
         if self.title:
             ax.set_title(self.title, fontsize=9)
-        ax.legend(loc="upper right", fontsize=7, framealpha=0.8)
+        if self.legend:
+            ax.legend(loc="best", fontsize=7, framealpha=0.8)
 
 
 def save_figures(figures: list[PlanFigure], path: str | Path, *, cols: int = 1,
@@ -102,7 +104,8 @@ def save_figures(figures: list[PlanFigure], path: str | Path, *, cols: int = 1,
         aspect = (ymax - ymin) / max(xmax - xmin, 1e-9)
     fig, axes = plt.subplots(rows, cols, figsize=(panel_size * cols, panel_size * aspect * rows + 0.6),
                              squeeze=False)
-    for ax, f in zip(axes.flat, figures):
+    for i, (ax, f) in enumerate(zip(axes.flat, figures)):
+        f.legend = f.legend and i == 0  # one legend per figure is enough
         f.draw(ax)
     for ax in list(axes.flat)[n:]:
         ax.axis("off")

@@ -127,7 +127,8 @@ def _add_sd_quality_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sample-seed", type=int, default=0, help="seed of the samples")
     parser.add_argument("--steps", type=_int_at_least(1), default=None,
                         help="DDIM steps (default: the checkpoint's)")
-    parser.add_argument("--eta", type=float, default=0.0, help="DDIM eta")
+    parser.add_argument("--eta", type=float, default=None,
+                        help="DDIM eta (default: the SD planner's, SparseConfig.eta)")
     parser.add_argument("--png", metavar="FILE", help="draw the first 8 plans")
     parser.add_argument("--json", metavar="FILE", help="also write the result as JSON to FILE")
 
@@ -141,11 +142,14 @@ def _run_sd_quality(args: argparse.Namespace) -> int:
     grid = load_map(args.map)
     ckpt = load_model("sd", grid, path=args.sd, horizon=10)
     problems = make_problems(grid, args.problems, seed=args.seed)
+    from ecahd_core.planner import SparseConfig
+
     steps = args.steps or sample_steps(ckpt)
-    metrics, plans = evaluate_sd(ckpt, grid, problems, num_steps=steps, eta=args.eta,
+    eta = SparseConfig().eta if args.eta is None else args.eta
+    metrics, plans = evaluate_sd(ckpt, grid, problems, num_steps=steps, eta=eta,
                                  seed=args.sample_seed)
     print(f"SD alone (unguided, 1 sample) on {grid.name}: {metrics.problems} problems "
-          f"(seed {args.seed}), {steps} DDIM steps, eta {args.eta}")
+          f"(seed {args.seed}), {steps} DDIM steps, eta {eta}")
     print(f"  a waypoint within 1.0 m of the goal: {100 * metrics.goal_reached:.1f}%  (target >= 85%)")
     print(f"  collision-free for a point robot:    {100 * metrics.collision_free_point:.1f}%  "
           f"(target >= 80%)")

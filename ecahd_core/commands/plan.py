@@ -108,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
              f"{timings['total']:.1f} ms")
     figure = PlanFigure(grid=grid, footprint=footprint, title=title, start=start, goal=goal,
                         trajectory=path, waypoints=waypoints, sweep_poses=poses[::step],
-                        colliding_poses=poses[report.colliding], extra_paths=candidates)
+                        colliding_poses=poses[report.colliding][::step], extra_paths=candidates)
     png = save_figures([figure], args.png)
     print(title)
     print(f"figure: {png}")

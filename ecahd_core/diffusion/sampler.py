@@ -50,6 +50,7 @@ if TYPE_CHECKING:
 
 DEFAULT_NUM_STEPS = 10  # DDIM sampling steps (of K = 100 training steps)
 DEFAULT_GUIDANCE_WEIGHT = 1.0  # omega
+DEFAULT_MAX_GUIDE_NORM = 1.0  # cap of the per-waypoint guidance gradient norm (eps units)
 
 GuideSteps = Callable[[int, int], bool] | Collection[int]
 """Where guidance is applied: a callable ``(step_index, timestep) -> bool`` or a collection of
@@ -121,7 +122,8 @@ def sample(model: Denoiser, scheduler: DDIMScheduler, normalizer: Normalizer, *,
            eta: float = 0.0, generator: torch.Generator | None = None,
            guide: Guide | None = None, guidance_weight: float = DEFAULT_GUIDANCE_WEIGHT,
            guide_steps: GuideSteps | None = None, return_intermediates: bool = False,
-           model_kwargs: Mapping[str, Any] | None = None) -> SampleOutput:
+           model_kwargs: Mapping[str, Any] | None = None,
+           max_guide_norm: float | None = DEFAULT_MAX_GUIDE_NORM) -> SampleOutput:
     """Sample ``batch`` trajectories of ``horizon`` waypoints with inpainting and optional guidance.
 
     Args:
@@ -137,6 +139,11 @@ def sample(model: Denoiser, scheduler: DDIMScheduler, normalizer: Normalizer, *,
         generator: randomness for the initial noise and eta > 0 (on the model's device).
         guide: cost J as a :class:`~ecahd_core.diffusion.guides.Guide` (metres), or None.
         guidance_weight: omega of Algorithm 2 line 5.
+        max_guide_norm: the guidance gradient dJ/dz of each row is scaled down (never up) so
+            that its largest per-waypoint norm is at most this; None leaves it raw. J sums
+            thousands of cost-map lookups, so raw gradients reach 1e3-1e4 in eps units and any
+            fixed omega either does nothing in free space or throws samples to the clip bound
+            near walls; capped, omega is the largest eps shift guidance may cause per step.
         guide_steps: at which steps to guide (default: all), see :data:`GuideSteps`.
         return_intermediates: also return every z_k and predicted x_0.
         model_kwargs: extra model inputs, e.g. {"map_feature": (1, d_model)}.
@@ -168,7 +175,11 @@ def sample(model: Denoiser, scheduler: DDIMScheduler, normalizer: Normalizer, *,
             eps = model(z, t_batch, **model_kwargs)  # (B, P, 2)
             if is_guided is not None and is_guided(i, t):
                 out = _evaluate_guide(guide, to_metres(z), batch, horizon)
-                eps = eps + guidance_weight * normalizer.grad_to_normalized(out.grad)
+                g = normalizer.grad_to_normalized(out.grad)  # dJ/dz (B, P, 2)
+                if max_guide_norm is not None:
+                    peak = g.norm(dim=-1).amax(dim=-1).clamp_min(1e-12)  # (B,)
+                    g = g * (max_guide_norm / peak).clamp(max=1.0)[:, None, None]
+                eps = eps + guidance_weight * g
                 costs.append(out.cost)
                 guided.append(i)
             step = scheduler.step(eps, t, z, eta=eta, generator=generator)
@@ -205,11 +216,15 @@ class SamplerConfig:
         num_steps: DDIM steps (1..K).
         eta: DDIM stochasticity.
         guidance_weight: omega.
+        max_guide_norm: cap of the per-waypoint guidance gradient norm (see :func:`sample`).
+        guide_last: guide only the last this-many DDIM steps (None: all steps).
     """
 
     num_steps: int = DEFAULT_NUM_STEPS
     eta: float = 0.0
     guidance_weight: float = DEFAULT_GUIDANCE_WEIGHT
+    max_guide_norm: float | None = DEFAULT_MAX_GUIDE_NORM
+    guide_last: int | None = None
 
     def __post_init__(self) -> None:
         if int(self.num_steps) != self.num_steps or self.num_steps < 1:
@@ -254,5 +269,8 @@ class DiffusionSampler:
         return sample(self.model, self.scheduler, self.normalizer, batch=batch, horizon=horizon,
                       conditions=conditions, num_steps=self.config.num_steps, eta=self.config.eta,
                       generator=generator, guide=guide,
-                      guidance_weight=self.config.guidance_weight, guide_steps=guide_steps,
+                      guidance_weight=self.config.guidance_weight,
+                      guide_steps=(guide_steps if guide_steps is not None or not self.config.guide_last
+                                   else set(range(-self.config.guide_last, 0))),
+                      max_guide_norm=self.config.max_guide_norm,
                       return_intermediates=return_intermediates, model_kwargs=model_kwargs)
