@@ -22,6 +22,7 @@ class SDQuality:
     eta: float
     goal_reached: float  # fraction with a waypoint within epsilon of the goal
     collision_free_point: float  # fraction collision-free for a point robot
+    expert_collision_free_point: float  # the same for the A* paths resampled to the horizon
     mean_length_ratio: float  # plan length / A* length
     sample_ms: float  # wall time of sampling all problems in one batch
     seed: int
@@ -50,9 +51,13 @@ def evaluate_sd(checkpoint, grid, problems, *, horizon: int = 10, num_steps: int
                          conditions={0: starts.to(device), -1: goals.to(device)}, generator=gen)
     elapsed = time.perf_counter() - t0
     plans = out.trajectories.cpu().numpy().astype(np.float64)
+    from ecahd_core.dataset import resample_by_arclength
+
     point = circle_footprint(POINT_ROBOT_RADIUS)
-    reached, free, ratio = [], [], []
+    reached, free, ratio, expert = [], [], [], []
     for plan, prob in zip(plans, problems):
+        expert.append(check_collision(resample_by_arclength(prob.astar_path, horizon), point,
+                                      grid).collision_free)
         reached.append(bool(np.min(np.linalg.norm(plan - prob.goal, axis=1)) < epsilon))
         free.append(check_collision(plan, point, grid).collision_free)
         ratio.append(float(np.sum(np.linalg.norm(np.diff(plan, axis=0), axis=1)))
@@ -60,6 +65,7 @@ def evaluate_sd(checkpoint, grid, problems, *, horizon: int = 10, num_steps: int
     metrics = SDQuality(problems=len(problems), horizon=horizon, num_steps=num_steps, eta=eta,
                         goal_reached=float(np.mean(reached)),
                         collision_free_point=float(np.mean(free)),
+                        expert_collision_free_point=float(np.mean(expert)),
                         mean_length_ratio=float(np.mean(ratio)), sample_ms=elapsed * 1e3,
                         seed=seed)
     return metrics, plans

@@ -153,6 +153,8 @@ def _run_sd_quality(args: argparse.Namespace) -> int:
     print(f"  a waypoint within 1.0 m of the goal: {100 * metrics.goal_reached:.1f}%  (target >= 85%)")
     print(f"  collision-free for a point robot:    {100 * metrics.collision_free_point:.1f}%  "
           f"(target >= 80%)")
+    print(f"  the A* expert resampled to the same waypoints: "
+          f"{100 * metrics.expert_collision_free_point:.1f}% collision-free")
     print(f"  mean length / A* length:             {metrics.mean_length_ratio:.3f}")
     print(f"  sampling all {metrics.problems} in one batch: {metrics.sample_ms:.0f} ms")
     if args.png:
