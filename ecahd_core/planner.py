@@ -50,6 +50,7 @@ class SparseConfig:
     eta: float = 1.0
     guidance: bool = False
     guidance_weight: float = 1.0
+    guidance_space: str = "eps"
 
     def __post_init__(self) -> None:
         if self.selection not in SELECTION_RULES:
@@ -127,7 +128,8 @@ class SparseDiffusion:
         self.sampler = DiffusionSampler.from_checkpoint(
             checkpoint, device=device, config=SamplerConfig(
                 num_steps=steps, eta=self.config.eta,
-                guidance_weight=self.config.guidance_weight))
+                guidance_weight=self.config.guidance_weight,
+                guidance_space=self.config.guidance_space))
         if cost is None and (self.config.guidance or self.config.selection == "collision_aware"):
             raise EcahdError("SD guidance and the collision_aware rule need the cost J "
                              "(costmap, footprint points, CostConfig)")
@@ -188,6 +190,8 @@ class DenseConfig:
             of lowest cost. 0 is the paper's behaviour.
         guide_last: guide only the last this-many DDIM steps (None: every step, as Alg. 2).
         max_guide_norm: cap of the per-waypoint guidance gradient (see diffusion.sampler).
+        guidance_space: "eps" (Algorithm 2 as written) or "x0" (J at the clean estimate,
+            step-dependent weight; see diffusion.sampler.sample).
     """
 
     points: int = 4
@@ -200,6 +204,7 @@ class DenseConfig:
     retries: int = 0
     guide_last: int | None = None
     max_guide_norm: float | None = 1.0
+    guidance_space: str = "eps"
 
 
 @dataclass(frozen=True)
@@ -227,6 +232,9 @@ class HierarchicalPlan:
         return int(sum(self.dd_segments))
 
 
+REPLAN_POLICIES = ("every_waypoint", "once")
+
+
 class HierarchicalPlanner:
     """Algorithm 1 with Algorithm 2's DenseDiffusion, over a whole problem.
 
@@ -235,10 +243,19 @@ class HierarchicalPlanner:
         dense_checkpoint: the DD checkpoint (None when ``dense.enabled`` is False).
         costmap, footprint_points, cost_config: the cost J (Algorithm 2 lines 11-25).
         dense: DenseConfig.
+        replan: "every_waypoint" (Algorithm 1: SD best-of-N again from each reached waypoint,
+            horizon P^g - p) or "once" (ours, faster: SD best-of-N once, then its remaining
+            waypoints are the global plan of every later iteration; in a static known map the
+            replanned distribution is the same, so this trades resampling for ~P^g times less SD
+            work).
     """
 
     def __init__(self, sparse: SparseDiffusion, dense_checkpoint, *, costmap, footprint_points,
-                 cost_config=None, dense: DenseConfig | None = None, device: str = "cpu") -> None:
+                 cost_config=None, dense: DenseConfig | None = None, device: str = "cpu",
+                 replan: str = "every_waypoint") -> None:
+        if replan not in REPLAN_POLICIES:
+            raise EcahdError(f"replan policy {replan!r} is not one of {list(REPLAN_POLICIES)}")
+        self.replan = replan
         from ecahd_core.cost import CostConfig
         from ecahd_core.diffusion import DiffusionSampler, SamplerConfig
         from ecahd_core.model_zoo import sample_steps
@@ -254,7 +271,8 @@ class HierarchicalPlanner:
             steps = self.dense.num_steps or sample_steps(dense_checkpoint)
             self.dd = DiffusionSampler.from_checkpoint(dense_checkpoint, device=device, config=SamplerConfig(
                 num_steps=steps, eta=self.dense.eta, guidance_weight=self.dense.guidance_weight,
-                guide_last=self.dense.guide_last, max_guide_norm=self.dense.max_guide_norm))
+                guide_last=self.dense.guide_last, max_guide_norm=self.dense.max_guide_norm,
+                guidance_space=self.dense.guidance_space))
 
     def local_cost(self, segments: torch.Tensor, goals: torch.Tensor) -> torch.Tensor:
         """J's collision cost c^l of local plans. segments: (B, P^l, 2), goals: (B, 2) -> (B,)."""
@@ -295,11 +313,17 @@ class HierarchicalPlanner:
         times = {"sd": 0.0, "j_check": 0.0, "dd": 0.0}
         global_plans, segments, dd_used, costs = [], [], [], []
         frac = torch.linspace(0.0, 1.0, P_l)[:, None]
+        remaining = None
         for p in range(P_g - 1):  # Algorithm 1 line 1 (the last iteration reaches G)
-            t0 = time.perf_counter()
-            g_plan = self.sparse.plan(S.numpy(), G.numpy(), horizon=P_g - p, generator=generator)
-            times["sd"] += (time.perf_counter() - t0) * 1e3
-            wp = torch.as_tensor(g_plan.waypoints, dtype=torch.float32)
+            if self.replan == "once" and remaining is not None:
+                waypoints = remaining  # the first plan's waypoints not yet reached
+            else:
+                t0 = time.perf_counter()
+                waypoints = self.sparse.plan(S.numpy(), G.numpy(), horizon=P_g - p,
+                                             generator=generator).waypoints
+                times["sd"] += (time.perf_counter() - t0) * 1e3
+            remaining = waypoints[1:]
+            wp = torch.as_tensor(waypoints, dtype=torch.float32)
             a, b = wp[0], wp[1]
             local = a + frac * (b - a)  # LocalPlan(t^g[0], t^g[1]): (P^l, 2)
             t0 = time.perf_counter()
@@ -311,7 +335,7 @@ class HierarchicalPlanner:
                 local, c_after = self.refine(a, b, generator=generator)
                 times["dd"] += (time.perf_counter() - t0) * 1e3
                 used = True
-            global_plans.append(g_plan.waypoints)
+            global_plans.append(waypoints)
             segments.append(local.numpy().astype(np.float64))
             dd_used.append(used)
             costs.append((c, c_after))
@@ -335,7 +359,7 @@ class FullDiffusion:
 
     def __init__(self, checkpoint, *, guidance: bool = False, cost=None,
                  guidance_weight: float = 1.0, num_steps: int | None = None, eta: float = 0.0,
-                 device: str = "cpu") -> None:
+                 guidance_space: str = "eps", device: str = "cpu") -> None:
         from ecahd_core.diffusion import DiffusionSampler, SamplerConfig
         from ecahd_core.model_zoo import sample_steps
 
@@ -345,7 +369,7 @@ class FullDiffusion:
         self.guidance, self.cost = guidance, cost
         self.sampler = DiffusionSampler.from_checkpoint(checkpoint, device=device, config=SamplerConfig(
             num_steps=num_steps or sample_steps(checkpoint), eta=eta,
-            guidance_weight=guidance_weight))
+            guidance_weight=guidance_weight, guidance_space=guidance_space))
 
     def plan(self, start, goal, *, generator: torch.Generator | None = None) -> np.ndarray:
         """start, goal: (2,) [m] -> (horizon, 2) [m]."""

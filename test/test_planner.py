@@ -54,3 +54,21 @@ def test_dd_runs_only_above_threshold(c_th):
     assert len(calls) == sum(above) == plan.dd_calls
     if c_th > 1e8:
         assert plan.dd_calls == 0
+
+
+def test_replan_once_samples_sd_once_and_follows_it():
+    fp = make_footprint("quadruped")
+    cc = CostConfig()
+    sd = SparseDiffusion(load_model("sd", GRID, footprint=fp), SparseConfig(num_candidates=4))
+    calls = []
+    original = sd.plan
+    sd.plan = lambda *a, **k: calls.append(1) or original(*a, **k)
+    hd = HierarchicalPlanner(sd, load_model("dd", GRID, footprint=fp), costmap=cc.make_costmap(GRID),
+                             footprint_points=fp.points, cost_config=cc, replan="once")
+    plan = hd.plan(np.array([1.5, 1.5]), np.array([10.5, 7.5]),
+                   generator=torch.Generator().manual_seed(0))
+    assert len(calls) == 1
+    first = plan.global_plans[0]
+    for p, g in enumerate(plan.global_plans):
+        assert np.allclose(g, first[p:])  # the same plan, shrinking from the front
+    assert np.allclose(plan.trajectory[-1], [10.5, 7.5], atol=1e-5)

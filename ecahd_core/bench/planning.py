@@ -65,8 +65,11 @@ class PlanningBenchSettings:
     methods: tuple[str, ...] = METHODS
     candidates: int = 10
     guidance_weight: float = 1.0
+    guidance_space: str = "eps"
+    margin: float = 0.1
     c_th: float = 0.1
     dd_retries: int = 0
+    replan: str = "every_waypoint"
     ablation: bool = True
 
 
@@ -145,7 +148,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
 
     def run_cell(method, guidance, robot, cost_config=None, variant=""):
         fp = make_footprint(robot)
-        cc = cost_config or CostConfig()
+        cc = cost_config or CostConfig(margin=settings.margin)
         cost = (cc.make_costmap(grid), torch.as_tensor(fp.points, dtype=torch.float32), cc)
         gen = torch.Generator().manual_seed(settings.sample_seed)
         if method == "astar":
@@ -153,12 +156,14 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
             plan_fn = lambda s, g: (astar.plan(s, g), None)  # noqa: E731
         elif method == "fd":
             fd = FullDiffusion(load_model("fd", grid, footprint=fp), guidance=guidance, cost=cost,
-                               guidance_weight=settings.guidance_weight)
+                               guidance_weight=settings.guidance_weight,
+                               guidance_space=settings.guidance_space)
             plan_fn = lambda s, g: (fd.plan(s, g, generator=gen), None)  # noqa: E731
         else:
             sd = SparseDiffusion(load_model("sd", grid, footprint=fp), SparseConfig(
                 num_candidates=settings.candidates, guidance=(method == "sd" and guidance),
-                guidance_weight=settings.guidance_weight), cost=cost)
+                guidance_weight=settings.guidance_weight,
+                guidance_space=settings.guidance_space), cost=cost)
             if method == "sd":
                 plan_fn = lambda s, g: (sd.plan(s, g, generator=gen).waypoints, None)  # noqa: E731
             else:
@@ -167,7 +172,9 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                                          cost_config=cc, dense=DenseConfig(
                                              c_th=settings.c_th, guidance=guidance,
                                              guidance_weight=settings.guidance_weight,
-                                             retries=settings.dd_retries))
+                                             guidance_space=settings.guidance_space,
+                                             retries=settings.dd_retries),
+                                         replan=settings.replan)
 
                 def plan_fn(s, g):
                     r = hd.plan(s, g, generator=gen)
@@ -199,14 +206,16 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
         radius = _mf("circle").circumscribed_radius
         for mode in ("point", "line", "surface"):
             for dilation in (0.0, radius):
-                cc = CostConfig(mode=mode, dilation=dilation)
+                cc = CostConfig(mode=mode, dilation=dilation, margin=settings.margin)
                 variant = f"{mode}{' + dilation' if dilation else ''}"
                 cell, _ = run_cell("hd", True, "circle", cost_config=cc, variant=variant)
                 ablation.append(cell)
     context = {"map": grid.name, "problems": len(problems), "seed": settings.seed,
                "sample_seed": settings.sample_seed, "candidates": settings.candidates,
                "guidance_weight": settings.guidance_weight, "c_th": settings.c_th,
-               "dd_retries": settings.dd_retries, "torch": torch.__version__,
+               "guidance_space": settings.guidance_space, "margin": settings.margin,
+               "dd_retries": settings.dd_retries, "replan": settings.replan,
+               "torch": torch.__version__,
                "threads": torch.get_num_threads()}
     return PlanningBenchResult(cells=cells, ablation=ablation, examples=examples,
                                problems=problems[:4], context=context)
@@ -226,7 +235,9 @@ def format_markdown(r: PlanningBenchResult) -> str:
                       for m, g in cols)
     lines = [f"Planning on {c['map']}: {c['problems']} held-out problems (seed {c['seed']}), "
              f"sampling seed {c['sample_seed']}, best of {c['candidates']} SD candidates, "
-             f"omega {c['guidance_weight']}, c_th {c['c_th']}, DD retries {c['dd_retries']}, "
+             f"omega {c['guidance_weight']} ({c['guidance_space']} space), c_th {c['c_th']}, "
+             f"cost-map margin {c['margin']} m, DD retries {c['dd_retries']}, "
+             f"SD replanning {c['replan']}, "
              f"torch {c['torch']} with {c['threads']} thread(s). Each cell: ours / paper.", "",
              f"| metric | robot | {head} |", "|---|---|" + "---|" * len(cols)]
 

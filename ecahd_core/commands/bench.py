@@ -180,9 +180,15 @@ def _add_planning_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--candidates", type=_int_at_least(1), default=d.candidates,
                         help="SD candidates per plan (best of N)")
     parser.add_argument("--omega", type=float, default=d.guidance_weight, help="guidance weight")
+    parser.add_argument("--guidance-space", default=d.guidance_space, choices=("eps", "x0"),
+                        help="where J is evaluated and how omega is scaled (diffusion.sampler)")
+    parser.add_argument("--margin", type=float, default=d.margin,
+                        help="[m] cost-map margin: J is 0 farther than this from obstacles")
     parser.add_argument("--c-th", type=float, default=d.c_th, help="DD trigger threshold")
     parser.add_argument("--dd-retries", type=_int_at_least(0), default=d.dd_retries,
                         help="our safety rule: resample DD while still colliding (0: paper)")
+    parser.add_argument("--replan", default=d.replan, choices=("every_waypoint", "once"),
+                        help="HD: SD best-of-N at every waypoint (Algorithm 1) or once")
     parser.add_argument("--no-ablation", action="store_true", help="skip Table II")
     parser.add_argument("--threads", type=_int_at_least(0), default=1,
                         help="torch threads (0: torch's default)")
@@ -203,7 +209,8 @@ def _run_planning(args: argparse.Namespace) -> int:
     settings = PlanningBenchSettings(
         map=args.map, problems=args.problems, seed=args.seed, sample_seed=args.sample_seed,
         robots=tuple(args.robots), methods=tuple(args.methods), candidates=args.candidates,
-        guidance_weight=args.omega, c_th=args.c_th, dd_retries=args.dd_retries,
+        guidance_weight=args.omega, guidance_space=args.guidance_space, margin=args.margin,
+        c_th=args.c_th, dd_retries=args.dd_retries, replan=args.replan,
         ablation=not args.no_ablation)
     result = run_planning_benchmark(settings, progress=not args.no_progress)
     md = format_markdown(result)

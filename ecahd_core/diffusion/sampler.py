@@ -51,6 +51,7 @@ if TYPE_CHECKING:
 DEFAULT_NUM_STEPS = 10  # DDIM sampling steps (of K = 100 training steps)
 DEFAULT_GUIDANCE_WEIGHT = 1.0  # omega
 DEFAULT_MAX_GUIDE_NORM = 1.0  # cap of the per-waypoint guidance gradient norm (eps units)
+GUIDANCE_SPACES = ("eps", "x0")
 
 GuideSteps = Callable[[int, int], bool] | Collection[int]
 """Where guidance is applied: a callable ``(step_index, timestep) -> bool`` or a collection of
@@ -123,7 +124,8 @@ def sample(model: Denoiser, scheduler: DDIMScheduler, normalizer: Normalizer, *,
            guide: Guide | None = None, guidance_weight: float = DEFAULT_GUIDANCE_WEIGHT,
            guide_steps: GuideSteps | None = None, return_intermediates: bool = False,
            model_kwargs: Mapping[str, Any] | None = None,
-           max_guide_norm: float | None = DEFAULT_MAX_GUIDE_NORM) -> SampleOutput:
+           max_guide_norm: float | None = DEFAULT_MAX_GUIDE_NORM,
+           guidance_space: str = "eps") -> SampleOutput:
     """Sample ``batch`` trajectories of ``horizon`` waypoints with inpainting and optional guidance.
 
     Args:
@@ -144,12 +146,20 @@ def sample(model: Denoiser, scheduler: DDIMScheduler, normalizer: Normalizer, *,
             thousands of cost-map lookups, so raw gradients reach 1e3-1e4 in eps units and any
             fixed omega either does nothing in free space or throws samples to the clip bound
             near walls; capped, omega is the largest eps shift guidance may cause per step.
+        guidance_space: "eps" (Algorithm 2 line 5 as written: J at the noisy sample z_k, eps
+            shifted by omega * dJ/dz) or "x0": J evaluated at the denoiser's clean estimate
+            x0_hat (inpainted, in metres), and eps shifted by omega_k * dJ/dz with
+            omega_k = omega * sqrt(alpha_bar_k / (1 - alpha_bar_k)), so that every step moves
+            x0_hat by omega (times the capped gradient) instead of a vanishing amount at the
+            last, least noisy steps. Same form eps + omega_k grad J, a step-dependent weight.
         guide_steps: at which steps to guide (default: all), see :data:`GuideSteps`.
         return_intermediates: also return every z_k and predicted x_0.
         model_kwargs: extra model inputs, e.g. {"map_feature": (1, d_model)}.
     Returns:
         :class:`SampleOutput`.
     """
+    if guidance_space not in GUIDANCE_SPACES:
+        raise ValueError(f"guidance_space {guidance_space!r} is not one of {list(GUIDANCE_SPACES)}")
     if batch < 1 or horizon < 2:
         raise ValueError(f"need batch >= 1 and horizon >= 2, got batch={batch}, horizon={horizon}")
     device = _device_of(model, scheduler)
@@ -174,12 +184,20 @@ def sample(model: Denoiser, scheduler: DDIMScheduler, normalizer: Normalizer, *,
             t_batch = torch.full((batch,), t, dtype=torch.long, device=device)
             eps = model(z, t_batch, **model_kwargs)  # (B, P, 2)
             if is_guided is not None and is_guided(i, t):
-                out = _evaluate_guide(guide, to_metres(z), batch, horizon)
+                weight = guidance_weight
+                at = z
+                if guidance_space == "x0":
+                    a_bar = scheduler.alphas_cumprod[t].to(z.dtype)
+                    at = (z - (1 - a_bar).sqrt() * eps) / a_bar.sqrt()  # x0_hat (normalised)
+                    if scheduler.clip_sample is not None:
+                        at = at.clamp(-scheduler.clip_sample, scheduler.clip_sample)
+                    weight = guidance_weight * float((a_bar / (1 - a_bar)).sqrt())
+                out = _evaluate_guide(guide, to_metres(at), batch, horizon)
                 g = normalizer.grad_to_normalized(out.grad)  # dJ/dz (B, P, 2)
                 if max_guide_norm is not None:
                     peak = g.norm(dim=-1).amax(dim=-1).clamp_min(1e-12)  # (B,)
                     g = g * (max_guide_norm / peak).clamp(max=1.0)[:, None, None]
-                eps = eps + guidance_weight * g
+                eps = eps + weight * g
                 costs.append(out.cost)
                 guided.append(i)
             step = scheduler.step(eps, t, z, eta=eta, generator=generator)
@@ -218,6 +236,7 @@ class SamplerConfig:
         guidance_weight: omega.
         max_guide_norm: cap of the per-waypoint guidance gradient norm (see :func:`sample`).
         guide_last: guide only the last this-many DDIM steps (None: all steps).
+        guidance_space: "eps" or "x0" (see :func:`sample`).
     """
 
     num_steps: int = DEFAULT_NUM_STEPS
@@ -225,6 +244,7 @@ class SamplerConfig:
     guidance_weight: float = DEFAULT_GUIDANCE_WEIGHT
     max_guide_norm: float | None = DEFAULT_MAX_GUIDE_NORM
     guide_last: int | None = None
+    guidance_space: str = "eps"
 
     def __post_init__(self) -> None:
         if int(self.num_steps) != self.num_steps or self.num_steps < 1:
@@ -273,4 +293,5 @@ class DiffusionSampler:
                       guide_steps=(guide_steps if guide_steps is not None or not self.config.guide_last
                                    else set(range(-self.config.guide_last, 0))),
                       max_guide_norm=self.config.max_guide_norm,
+                      guidance_space=self.config.guidance_space,
                       return_intermediates=return_intermediates, model_kwargs=model_kwargs)

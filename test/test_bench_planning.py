@@ -1,0 +1,24 @@
+"""`ecahd bench planning --problems 4` with the shipped models: well-formed JSON and markdown."""
+import json
+
+from ecahd_ros.cli import main
+
+KEYS = {"method", "guidance", "robot", "success", "success_final", "collision_free",
+        "collision_rate", "length_ratio", "time_ms_mean", "time_ms_p95", "dd_ratio"}
+
+
+def test_bench_planning_small(tmp_path):
+    js, md, png = tmp_path / "p.json", tmp_path / "p.md", tmp_path / "p.png"
+    assert main(["bench", "planning", "--problems", "2", "--robots", "quadruped", "--no-progress",
+                 "--json", str(js), "--md", str(md), "--png", str(png)]) == 0
+    r = json.loads(js.read_text())
+    # FD, SD, HD x {without, with guidance} + A*
+    assert len(r["cells"]) == 7 and len(r["ablation"]) == 6
+    for cell in r["cells"] + r["ablation"]:
+        assert KEYS <= set(cell)
+        assert 0 <= cell["collision_free"] <= 100 and cell["time_ms_mean"] > 0
+    astar = next(c for c in r["cells"] if c["method"] == "astar")
+    assert astar["collision_free"] == 100.0 and abs(astar["length_ratio"] - 1.0) < 1e-9
+    text = md.read_text()
+    assert "HD ✓ (ECAHD)" in text and "Table II" in text and "/ 89.1" in text
+    assert png.stat().st_size > 10_000
