@@ -18,7 +18,8 @@ def test_bench_planning_small(tmp_path):
         assert KEYS <= set(cell)
         assert 0 <= cell["collision_free"] <= 100 and cell["time_ms_mean"] > 0
     astar = next(c for c in r["cells"] if c["method"] == "astar")
-    assert astar["collision_free"] == 100.0 and abs(astar["length_ratio"] - 1.0) < 1e-9
+    # the reference A* keeps the problems' 0.4 m clearance; the quadruped's A* needs less
+    assert astar["collision_free"] == 100.0 and 0.8 < astar["length_ratio"] <= 1.0 + 1e-9
     text = md.read_text()
     assert "HD ✓ (ECAHD)" in text and "Table II" in text and "/ 89.1" in text
     assert png.stat().st_size > 10_000
