@@ -2,9 +2,13 @@
 a figure (path, footprint sweep, collisions in red) and a JSON record.
 
 Methods:
-- ``astar``  A* with footprint clearance (the expert and classical reference);
+- ``ecahd``  Algorithm 1: SD best-of-N global plan, straight local plans checked by J, guided
+             Dense Diffusion where J's collision cost exceeds c_th (= ``hd --guidance``);
+- ``hd``     the same hierarchy, DD unguided unless ``--guidance``;
 - ``sd``     Sparse Diffusion alone: N candidates in one batch, the best by the paper's rule,
-             followed by straight lines between its waypoints.
+             followed by straight lines between its waypoints (``--guidance``: SD guided by J);
+- ``fd``     Diffuser-style full-sequence diffusion, 100 points (``--guidance``: guided by J);
+- ``astar``  A* with footprint clearance (the expert and classical reference).
 """
 from __future__ import annotations
 
@@ -16,7 +20,7 @@ from pathlib import Path
 
 log = logging.getLogger("ecahd.plan")
 
-METHODS = ("astar", "sd")
+METHODS = ("ecahd", "hd", "sd", "fd", "astar")
 DEFAULT_START = (1.5, 1.5)
 DEFAULT_GOAL = (10.5, 7.5)
 SWEEP_SPACING = 0.25  # [m] between footprint outlines drawn along the path
@@ -35,7 +39,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="start position [m] in the map frame")
     p.add_argument("--goal", nargs=2, type=float, default=DEFAULT_GOAL, metavar=("X", "Y"),
                    help="goal position [m] in the map frame")
-    p.add_argument("--method", choices=METHODS, default="astar", help="planner")
+    p.add_argument("--method", choices=METHODS, default="ecahd", help="planner")
+    p.add_argument("--guidance", action=argparse.BooleanOptionalAction, default=None,
+                   help="guide the diffusion by the cost J (default: on for ecahd, off otherwise)")
     p.add_argument("--waypoints", type=int, default=10,
                    help="number of sparse waypoints reported (P^g)")
     p.add_argument("--candidates", type=int, default=10,
@@ -44,6 +50,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    choices=("shortest_reaching", "collision_aware"), help="best-of-N rule")
     p.add_argument("--seed", type=int, default=0, help="sampling seed")
     p.add_argument("--sd-model", default=None, help="SD checkpoint (default: the shipped one)")
+    p.add_argument("--dd-model", default=None, help="DD checkpoint (default: the shipped one)")
+    p.add_argument("--fd-model", default=None, help="FD checkpoint (default: the shipped one)")
     p.add_argument("--png", default="runs/plan.png", help="figure to write")
     p.add_argument("--json", default=None, help="plan record to write (JSON)")
 
@@ -64,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
     start = grid.validate_point(args.start, "start")
     goal = grid.validate_point(args.goal, "goal")
 
-    candidates = []
+    candidates, dd_calls, dd_poses = [], 0, None
     if args.method == "astar":
         t0 = time.perf_counter()
         planner = AStarPlanner(grid, clearance_for_footprint(footprint, padding=args.padding))
@@ -75,27 +83,8 @@ def run(args: argparse.Namespace) -> int:
         timings = {"inflate": (t1 - t0) * 1e3, "search": (t2 - t1) * 1e3,
                    "total": (t2 - t0) * 1e3}
     else:
-        import torch
-
-        from ecahd_core.model_zoo import load_model
-        from ecahd_core.planner import SparseConfig, SparseDiffusion
-
-        ckpt = load_model("sd", grid, path=args.sd_model, footprint=footprint,
-                          horizon=args.waypoints)
-        cost = None
-        if args.selection == "collision_aware":
-            from ecahd_core.cost import CostConfig
-
-            cc = CostConfig()
-            cost = (cc.make_costmap(grid), torch.as_tensor(footprint.points, dtype=torch.float32), cc)
-        sd = SparseDiffusion(ckpt, SparseConfig(num_candidates=args.candidates,
-                                                horizon=args.waypoints, selection=args.selection),
-                             cost=cost)
-        sd.plan(start, goal, generator=torch.Generator().manual_seed(args.seed))  # warm-up
-        plan = sd.plan(start, goal, generator=torch.Generator().manual_seed(args.seed))
-        waypoints = path = plan.waypoints
-        candidates = [c for i, c in enumerate(plan.candidates) if i != plan.best]
-        timings = {"sd": plan.time_ms, "total": plan.time_ms}
+        path, waypoints, candidates, timings, dd_calls, dd_poses = _plan_diffusion(
+            args, grid, footprint, start, goal)
     report = check_collision(path, footprint, grid)
     length = path_length(path)
     success = bool(np.min(np.linalg.norm(path - goal, axis=1)) <= 1.0)
@@ -103,11 +92,13 @@ def run(args: argparse.Namespace) -> int:
     poses = report.dense_poses
     step = max(1, int(round(SWEEP_SPACING / max(float(np.median(
         np.linalg.norm(np.diff(poses[:, :2], axis=0), axis=1))) if len(poses) > 1 else 1.0, 1e-9))))
-    title = (f"{args.method} on {grid.name}, robot {footprint.name}: length {length:.2f} m, "
+    title = (f"{args.method}{' + guidance' if _guided(args) and args.method != 'ecahd' else ''} "
+             f"on {grid.name}, robot {footprint.name}: length {length:.2f} m, "
              f"{'collision-free' if report.collision_free else 'COLLIDES'}, "
              f"{timings['total']:.1f} ms")
     figure = PlanFigure(grid=grid, footprint=footprint, title=title, start=start, goal=goal,
-                        trajectory=path, waypoints=waypoints, sweep_poses=poses[::step],
+                        trajectory=path, waypoints=waypoints,
+                        sweep_poses=poses[::step] if dd_poses is None else dd_poses,
                         colliding_poses=poses[report.colliding][::step], extra_paths=candidates)
     png = save_figures([figure], args.png)
     print(title)
@@ -120,9 +111,63 @@ def run(args: argparse.Namespace) -> int:
             "length_m": length, "success": success,
             "collision_free": bool(report.collision_free),
             "penetration_fraction": float(report.penetration_fraction),
-            "timings_ms": timings, "dd_calls": 0,
+            "timings_ms": timings, "dd_calls": dd_calls,
         }
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(record, indent=1))
         print(f"record: {args.json}")
     return 0
+
+
+def _guided(args) -> bool:
+    return args.method == "ecahd" if args.guidance is None else bool(args.guidance)
+
+
+def _plan_diffusion(args, grid, footprint, start, goal):
+    """SD / FD / HD / ECAHD -> (path, waypoints, candidates, timings, dd_calls, dd_poses)."""
+    import numpy as np
+    import torch
+
+    from ecahd_core.collision import densify
+    from ecahd_core.cost import CostConfig
+    from ecahd_core.model_zoo import load_model
+    from ecahd_core.planner import (DenseConfig, FullDiffusion, HierarchicalPlanner, SparseConfig,
+                                    SparseDiffusion)
+
+    guided = _guided(args)
+    cc = CostConfig()
+    cost = (cc.make_costmap(grid), torch.as_tensor(footprint.points, dtype=torch.float32), cc)
+
+    def gen():
+        return torch.Generator().manual_seed(args.seed)
+
+    if args.method == "fd":
+        fd = FullDiffusion(load_model("fd", grid, path=args.fd_model, footprint=footprint),
+                           guidance=guided, cost=cost)
+        fd.plan(start, goal, generator=gen())  # warm-up
+        t0 = time.perf_counter()
+        path = fd.plan(start, goal, generator=gen())
+        ms = (time.perf_counter() - t0) * 1e3
+        return path, path[:: max(1, len(path) // 10)], [], {"fd": ms, "total": ms}, 0, None
+    sd = SparseDiffusion(load_model("sd", grid, path=args.sd_model, footprint=footprint,
+                                    horizon=args.waypoints),
+                         SparseConfig(num_candidates=args.candidates, horizon=args.waypoints,
+                                      selection=args.selection,
+                                      guidance=(args.method == "sd" and guided)), cost=cost)
+    if args.method == "sd":
+        sd.plan(start, goal, generator=gen())  # warm-up
+        plan = sd.plan(start, goal, generator=gen())
+        others = [c for i, c in enumerate(plan.candidates) if i != plan.best]
+        return (plan.waypoints, plan.waypoints, others, {"sd": plan.time_ms, "total": plan.time_ms},
+                0, None)
+    hd = HierarchicalPlanner(sd, load_model("dd", grid, path=args.dd_model, footprint=footprint),
+                             costmap=cost[0], footprint_points=footprint.points, cost_config=cc,
+                             dense=DenseConfig(guidance=guided))
+    hd.plan(start, goal, generator=gen())  # warm-up
+    plan = hd.plan(start, goal, generator=gen())
+    # footprint outlines where DD fired
+    refined = [seg for seg, used in zip(plan.segments, plan.dd_segments) if used]
+    dd_poses = (np.concatenate([densify(seg, step=0.15) for seg in refined])
+                if refined else np.zeros((0, 3)))
+    return (plan.trajectory, plan.global_plans[0], [], dict(plan.timings_ms), plan.dd_calls,
+            dd_poses)
