@@ -11,7 +11,8 @@ from ecahd_ros.cli import main
 
 def test_plan_astar_writes_png_and_json(tmp_path):
     png, rec = tmp_path / "p.png", tmp_path / "p.json"
-    assert main(["plan", "--map", "maze2d-large", "--robot", "humanoid", "--start", "1.5", "1.5",
+    assert main(["plan", "--method", "astar", "--map", "maze2d-large", "--robot", "humanoid",
+                 "--start", "1.5", "1.5",
                  "--goal", "10.5", "7.5", "--png", str(png), "--json", str(rec)]) == 0
     assert png.stat().st_size > 10_000
     r = json.loads(rec.read_text())

@@ -63,3 +63,17 @@ def test_bench_sd_quality_small(tmp_path):
     r = json.loads(out.read_text())
     assert r["problems"] == 4 and 0.0 <= r["collision_free_point"] <= 1.0
     assert r["goal_reached"] == 1.0  # the goal is inpainted: the last waypoint is the goal
+
+
+@pytest.mark.parametrize("method, guidance", [("ecahd", None), ("hd", "--no-guidance"),
+                                              ("fd", "--guidance")])
+def test_plan_hierarchical_and_fd(tmp_path, method, guidance):
+    rec = tmp_path / "r.json"
+    argv = ["plan", "--method", method, "--robot", "quadruped", "--start", "1.5", "1.5",
+            "--goal", "6.5", "5.5", "--candidates", "4", "--png", str(tmp_path / "r.png"),
+            "--json", str(rec)] + ([guidance] if guidance else [])
+    assert main(argv) == 0
+    r = json.loads(rec.read_text())
+    traj = np.array(r["trajectory"])
+    assert np.allclose(traj[0], [1.5, 1.5]) and np.allclose(traj[-1], [6.5, 5.5], atol=1e-5)
+    assert r["method"] == method and r["dd_calls"] >= 0 and r["timings_ms"]["total"] > 0
