@@ -28,6 +28,8 @@ TEST_REQUIRES = ["pytest", "pytest-timeout", "colcon-common-extensions", "colcon
 CONSOLE_SCRIPTS = [
     "ecahd = ecahd_ros.cli:main",
     "map_publisher = ecahd_ros.map_publisher:main",
+    "sim_bridge = sim_bridge.node:main",
+    "bag_recorder = ecahd_ros.bag_recorder:main",
 ]
 
 setup(

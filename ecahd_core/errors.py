@@ -33,3 +33,13 @@ class CheckpointError(EcahdError):
 
 class DatasetError(EcahdError):
     """An expert dataset file that is missing, of another version, or inconsistent."""
+
+
+class SimError(EcahdError):
+    """Simulator input that cannot be used: NaN velocities, a pose off the map or inside a wall,
+    a configuration value out of range."""
+
+
+class BagError(EcahdError):
+    """A bag that cannot be written or read: an existing output directory, a bad storage name,
+    a missing or unreadable bag."""

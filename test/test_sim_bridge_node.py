@@ -1,0 +1,181 @@
+"""The sim_bridge node in-process on maze2d-umaze, as fast as possible: latched map, cmd_vel
+drives odom, stale commands stop, sim clock, bad input logged and ignored."""
+import math
+import os
+import time
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+from geometry_msgs.msg import PoseWithCovarianceStamped, Twist, TwistStamped  # noqa: E402
+from nav_msgs.msg import OccupancyGrid, Odometry  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from rosgraph_msgs.msg import Clock  # noqa: E402
+from sensor_msgs.msg import Image  # noqa: E402
+from std_msgs.msg import Bool  # noqa: E402
+
+from ecahd_core.maps import builtin_map  # noqa: E402
+from ecahd_ros.conversions import msg_to_grid, pose_from_xy_yaw, yaw_from_quaternion  # noqa: E402
+from ecahd_ros.map_publisher import MAP_QOS  # noqa: E402
+from sim_bridge.node import SimBridge  # noqa: E402
+
+# a domain of its own per test process, so parallel test runs do not hear each other
+DOMAIN_ID = 120 + os.getpid() % 50
+START = (1.5, 1.5, 0.0)  # umaze corridor y in [1, 2], free for x in [1, 4]
+DT = 0.02  # 1 / rate_hz (50)
+
+
+@pytest.fixture
+def ros_context():
+    context = rclpy.context.Context()
+    rclpy.init(context=context, domain_id=DOMAIN_ID)
+    yield context
+    rclpy.try_shutdown(context=context)
+
+
+@pytest.fixture
+def bridge_setup(ros_context):
+    """make(**params) -> (bridge, probe node, executor), everything torn down afterwards."""
+    created = []
+
+    def make(**params):
+        values = {"map": "maze2d-umaze", "realtime_factor": 0.0, "start_x": START[0],
+                  "start_y": START[1], "start_yaw": START[2], **params}
+        bridge = SimBridge(context=ros_context,
+                           parameter_overrides=[Parameter(k, value=v) for k, v in values.items()])
+        probe = rclpy.create_node("probe", context=ros_context)
+        executor = SingleThreadedExecutor(context=ros_context)
+        executor.add_node(bridge)
+        executor.add_node(probe)
+        created.append((executor, bridge, probe))
+        return bridge, probe, executor
+
+    yield make
+    for executor, bridge, probe in created:
+        executor.shutdown()
+        bridge.destroy_node()
+        probe.destroy_node()
+
+
+def spin_until(executor, condition, timeout: float = 10.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < deadline, "condition not met within the time limit"
+        executor.spin_once(timeout_sec=0.01)
+
+
+def publish_when_matched(executor, publisher, msg) -> None:
+    """Publish once the bridge's subscription is matched (a volatile message sent before
+    discovery is lost)."""
+    spin_until(executor, lambda: publisher.get_subscription_count() > 0)
+    publisher.publish(msg)
+
+
+def test_late_subscriber_gets_the_latched_map(bridge_setup):
+    bridge, probe, executor = bridge_setup()
+    spin_until(executor, lambda: bridge.sim.state.t >= 0.5)
+    received = []
+    probe.create_subscription(OccupancyGrid, "map", received.append, MAP_QOS)
+    spin_until(executor, lambda: received)
+    assert np.array_equal(msg_to_grid(received[0]).occupied,
+                          builtin_map("maze2d-umaze", 0.1).occupied)
+
+
+def test_twist_drives_along_x_until_the_command_goes_stale(bridge_setup):
+    bridge, probe, executor = bridge_setup(control_timeout=0.5)
+    odom = []
+    probe.create_subscription(Odometry, "odom", odom.append, 100)
+    pub = probe.create_publisher(Twist, "cmd_vel", 10)
+    cmd = Twist()
+    cmd.linear.x = 0.5
+    publish_when_matched(executor, pub, cmd)
+    spin_until(executor, lambda: bridge.sim.state.v > 0)  # the command arrived ...
+    spin_until(executor, lambda: bridge.sim.state.v == 0.0)  # ... and went stale
+    t_stop = bridge.sim.state.t
+    spin_until(executor, lambda: odom and odom[-1].header.stamp.sec >= math.ceil(t_stop) + 1)
+    # one command, then the control timeout of 0.5 s sim time at 0.5 m/s: 0.25 m (+- a step)
+    s = bridge.sim.state
+    assert s.x - START[0] == pytest.approx(0.25, abs=0.5 * DT + 1e-9)
+    assert (s.y, s.yaw) == pytest.approx(START[1:])
+    moving = [m for m in odom if m.twist.twist.linear.x > 0]
+    assert moving and len(moving) <= round(0.5 / DT) + 1
+    last = odom[-1]
+    assert (last.header.frame_id, last.child_frame_id) == ("map", "base_link")
+    assert last.pose.pose.position.x == pytest.approx(s.x)
+    assert last.twist.twist.linear.x == 0.0
+    xs = [m.pose.pose.position.x for m in odom]
+    assert xs == sorted(xs)  # along +x only
+
+
+def test_clock_advances_in_sim_steps(bridge_setup):
+    bridge, probe, executor = bridge_setup(rate_hz=50.0)
+    clocks, collisions = [], []
+    probe.create_subscription(Clock, "clock", clocks.append, 100)
+    probe.create_subscription(Bool, "collision", collisions.append, 100)
+    spin_until(executor, lambda: len(clocks) >= 50 and collisions)
+    ns = [c.clock.sec * 10**9 + c.clock.nanosec for c in clocks]
+    assert all(b > a for a, b in zip(ns, ns[1:]))
+    assert all(n % (DT * 1e9) == 0 for n in ns)  # whole steps of 20 ms
+    assert collisions[-1].data is False  # standing still in free space
+
+
+def test_nan_cmd_vel_is_ignored_and_logged(bridge_setup, capfd):
+    bridge, probe, executor = bridge_setup()
+    pub = probe.create_publisher(Twist, "cmd_vel", 10)
+    cmd = Twist()
+    cmd.linear.x = float("nan")
+    publish_when_matched(executor, pub, cmd)
+    spin_until(executor, lambda: bridge.rejected_commands == 1)
+    t = bridge.sim.state.t
+    spin_until(executor, lambda: bridge.sim.state.t >= t + 0.2)
+    assert (bridge.sim.state.x, bridge.sim.state.y) == START[:2]
+    assert "non-finite" in capfd.readouterr().err
+
+
+def test_twist_stamped_when_enabled(bridge_setup):
+    bridge, probe, executor = bridge_setup(enable_stamped_cmd_vel=True)
+    pub = probe.create_publisher(TwistStamped, "cmd_vel", 10)
+    cmd = TwistStamped()
+    cmd.header.frame_id = "base_link"
+    cmd.twist.linear.x = 1.0
+    publish_when_matched(executor, pub, cmd)
+    spin_until(executor, lambda: bridge.sim.state.x > START[0] + 0.1)
+    assert bridge.sim.state.y == pytest.approx(START[1])
+
+
+def test_initialpose_teleports_and_a_pose_in_a_wall_is_ignored(bridge_setup):
+    bridge, probe, executor = bridge_setup()
+    pub = probe.create_publisher(PoseWithCovarianceStamped, "initialpose", 10)
+    msg = PoseWithCovarianceStamped()
+    msg.header.frame_id = "map"
+    msg.pose.pose = pose_from_xy_yaw(0.5, 0.5, 0.0)  # inside the outer wall: ignored
+    publish_when_matched(executor, pub, msg)
+    msg.pose.pose = pose_from_xy_yaw(3.5, 2.5, math.pi / 2)  # umaze cell (3, 2) is free
+    pub.publish(msg)
+    spin_until(executor, lambda: bridge.sim.state.x == 3.5)
+    s = bridge.sim.state
+    assert (s.y, s.yaw, s.contact_count) == pytest.approx((2.5, math.pi / 2, 0))
+    odom = []
+    probe.create_subscription(Odometry, "odom", odom.append, 10)
+    spin_until(executor, lambda: odom)
+    assert yaw_from_quaternion(odom[-1].pose.pose.orientation) == pytest.approx(math.pi / 2)
+
+
+def test_camera_image_is_rgb8_top_view(bridge_setup):
+    bridge, probe, executor = bridge_setup(publish_camera=True, camera_rate_hz=10.0)
+    images = []
+    probe.create_subscription(Image, "camera/image_raw", images.append, 10)
+    spin_until(executor, lambda: len(images) >= 2)
+    img = images[-1]
+    assert (img.encoding, img.height, img.width, img.step) == ("rgb8", 256, 256, 256 * 3)
+    assert len(img.data) == 256 * 256 * 3
+
+
+def test_bad_parameters_are_logged_not_raised(ros_context):
+    for params in ([Parameter("map", value="no-such-map")],
+                   [Parameter("map", value="maze2d-umaze"), Parameter("rate_hz", value=-5.0)]):
+        bridge = SimBridge(context=ros_context, parameter_overrides=params)
+        assert bridge.sim is None
+        bridge.destroy_node()
