@@ -182,7 +182,9 @@ class DenseConfig:
         c_th: DD runs when the straight local plan's collision cost exceeds this.
         enabled: run DD at all (False: follow the straight local plans, "w/o DD").
         guidance: guide DD by J (ECAHD) or not (HD without guidance).
-        guidance_weight: omega of Algorithm 2 line 5.
+        guidance_weight: omega of Algorithm 2 line 5. The paper leaves it open; 0.03 in "x0"
+            space was the best of {0.01, 0.03, 0.1} and of "eps"-space omega 1 on 64 held-out
+            problems (docs/RESULTS.md, "Guidance strength").
         num_steps: DDIM steps (None: the checkpoint's).
         eta: DDIM eta.
         retries: our safety rule, beyond the paper: when the refined segment's collision cost
@@ -198,13 +200,13 @@ class DenseConfig:
     c_th: float = 0.1
     enabled: bool = True
     guidance: bool = True
-    guidance_weight: float = 1.0
+    guidance_weight: float = 0.03
     num_steps: int | None = None
     eta: float = 0.0
     retries: int = 0
     guide_last: int | None = None
     max_guide_norm: float | None = 1.0
-    guidance_space: str = "eps"
+    guidance_space: str = "x0"
 
 
 @dataclass(frozen=True)

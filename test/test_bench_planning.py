@@ -23,3 +23,13 @@ def test_bench_planning_small(tmp_path):
     text = md.read_text()
     assert "HD ✓ (ECAHD)" in text and "Table II" in text and "/ 89.1" in text
     assert png.stat().st_size > 10_000
+
+
+def test_bench_defaults_follow_the_planner():
+    # the bench module avoids importing torch at parser-build time, so it restates two defaults
+    from ecahd_core.bench.planning import PlanningBenchSettings
+    from ecahd_core.planner import DenseConfig
+
+    assert PlanningBenchSettings().guidance_weight == DenseConfig().guidance_weight
+    assert PlanningBenchSettings().guidance_space == DenseConfig().guidance_space
+    assert PlanningBenchSettings().c_th == DenseConfig().c_th

@@ -64,8 +64,8 @@ class PlanningBenchSettings:
     robots: tuple[str, ...] = ROBOTS
     methods: tuple[str, ...] = METHODS
     candidates: int = 10
-    guidance_weight: float = 1.0
-    guidance_space: str = "eps"
+    guidance_weight: float = 0.03  # DenseConfig's default
+    guidance_space: str = "x0"  # DenseConfig's default
     margin: float = 0.1
     c_th: float = 0.1
     dd_retries: int = 0
