@@ -13,8 +13,8 @@ rosbags typestore for ROS 2 Jazzy: a type it does not know is logged and skipped
 
 Nothing received is dropped: ``received`` and ``written`` count per topic, are logged on close,
 and differ only if the storage failed (each failure is logged). The bag is closed (index and
-metadata.yaml written) by :meth:`BagRecorder.close`, which ``destroy_node`` and ``main()``'s
-``finally`` call, so Ctrl-C leaves a complete bag.
+metadata.yaml written) by :meth:`BagRecorder.close`, which ``destroy_node`` calls (and
+``main()`` always destroys the node), so Ctrl-C leaves a complete bag.
 
 Parameters (read-only):
     output (str, ""): bag directory to create; it must not exist. Empty: rosbag2_<date>-<time>
@@ -39,7 +39,6 @@ from pathlib import Path
 import rclpy
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness, QosReliability,
@@ -48,6 +47,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 from rosbags.typesys import Stores, get_typestore
 
 from ecahd_core.errors import EcahdError, BagError
+from ecahd_ros.spin import spin_node
 
 BAG_VERSION = 9  # rosbag2 metadata version of Jazzy (offered_qos_profiles as a list)
 TYPESTORE = Stores.ROS2_JAZZY
@@ -295,16 +295,7 @@ def read_bag(path, topics=None) -> dict[str, list[tuple[int, object]]]:
 
 
 def main(args=None) -> None:
-    rclpy.init(args=args)
-    node = BagRecorder()
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.close()
-        node.destroy_node()
-        rclpy.try_shutdown()
+    spin_node(BagRecorder, args)
 
 
 if __name__ == "__main__":

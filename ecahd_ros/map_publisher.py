@@ -11,7 +11,6 @@ Publishes ``map`` (nav_msgs/OccupancyGrid, reliable + transient_local + depth 1,
 from __future__ import annotations
 
 import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rcl_interfaces.msg import ParameterDescriptor
@@ -20,6 +19,7 @@ from nav_msgs.msg import OccupancyGrid
 from ecahd_core.errors import EcahdError
 from ecahd_core.maps import GridMap, load_map
 from ecahd_ros.conversions import grid_to_msg
+from ecahd_ros.spin import spin_node
 
 MAP_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -51,15 +51,7 @@ class MapPublisher(Node):
 
 
 def main(args=None) -> None:
-    rclpy.init(args=args)
-    node = MapPublisher()
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+    spin_node(MapPublisher, args)
 
 
 if __name__ == "__main__":

@@ -47,7 +47,6 @@ from geometry_msgs.msg import PoseWithCovarianceStamped, Twist, TwistStamped
 from nav_msgs.msg import OccupancyGrid, Odometry
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock as ClockMsg
@@ -57,6 +56,7 @@ from std_msgs.msg import Bool
 from ecahd_core.errors import EcahdError
 from ecahd_ros.conversions import grid_to_msg, pose_from_xy_yaw, yaw_from_quaternion
 from ecahd_ros.map_publisher import MAP_QOS
+from ecahd_ros.spin import spin_node
 from sim_bridge.sim import MazeSim, SimConfig, SimError, SimState
 
 CAMERA_SIZE = 256  # [px] longer side of the top-down image
@@ -256,15 +256,7 @@ class SimBridge(Node):
 
 
 def main(args=None) -> None:
-    rclpy.init(args=args)
-    node = SimBridge()
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+    spin_node(SimBridge, args)
 
 
 if __name__ == "__main__":

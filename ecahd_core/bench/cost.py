@@ -12,10 +12,9 @@ from __future__ import annotations
 import logging
 import os
 import platform
-import statistics
-import time
 from dataclasses import asdict, dataclass
 
+from ecahd_core.bench.timing import median_ms
 from ecahd_core.errors import EcahdError
 
 log = logging.getLogger(__name__)
@@ -119,15 +118,6 @@ def make_problem(settings: CostBenchSettings):
     return traj_t, goal, footprint, costmap
 
 
-def _median_ms(fn, repeats: int, warmup: int = 0) -> float:
-    for _ in range(warmup):
-        fn()
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return 1e3 * statistics.median(times)
 
 
 def run_cost_benchmark(settings: CostBenchSettings = CostBenchSettings()) -> CostBenchResult:
@@ -151,12 +141,12 @@ def run_cost_benchmark(settings: CostBenchSettings = CostBenchSettings()) -> Cos
             terms = trajectory_cost_loops(traj, goal, footprint, costmap, **kwargs)
             return torch.autograd.grad(terms.total.sum(), traj)[0]
 
-        batched_ms = _median_ms(batched, settings.repeats, settings.warmup)
+        batched_ms = median_ms(batched, settings.repeats, settings.warmup)
         loop_ms = speedup = max_abs_diff = None
         if settings.loop_repeats:
             log.info("timing the loop reference (%d run(s), a few seconds each)",
                      settings.loop_repeats)
-            loop_ms = _median_ms(loops, settings.loop_repeats)
+            loop_ms = median_ms(loops, settings.loop_repeats)
             speedup = loop_ms / batched_ms
             with torch.no_grad():
                 a = trajectory_cost(traj, goal, footprint, costmap, **kwargs).total

@@ -18,6 +18,8 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from ecahd_core.bench.timing import median_ms
+
 log = logging.getLogger(__name__)
 
 # Paper figures (A100 80GB + 2x Xeon Gold 6338): Table I (seconds per problem) and Table IV.
@@ -53,15 +55,6 @@ class SamplingBenchResult:
         return asdict(self)
 
 
-def _median_ms(fn, repeats: int, warmup: int = 2) -> float:
-    for _ in range(warmup):
-        fn()
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append((time.perf_counter() - t0) * 1e3)
-    return statistics.median(times)
 
 
 def run_sampling_benchmark(settings: SamplingBenchSettings, *, models: dict | None = None
@@ -98,7 +91,7 @@ def run_sampling_benchmark(settings: SamplingBenchSettings, *, models: dict | No
     def sd():
         return samplers["sd"].sample(batch=10, horizon=10, conditions={0: start, -1: goal},
                                      generator=gen)
-    sd_ms = _median_ms(sd, reps)
+    sd_ms = median_ms(sd, reps, warmup=2)
 
     # DD for all 9 segments of one plan: local start t^g[p], local goal t^g[p+1]
     plan = torch.tensor(problem.astar_path, dtype=torch.float32)
@@ -112,7 +105,7 @@ def run_sampling_benchmark(settings: SamplingBenchSettings, *, models: dict | No
         return samplers["dd"].sample(batch=n_seg, horizon=P_l,
                                      conditions={0: seg_start, -1: seg_goal},
                                      generator=gen, guide=guide)
-    dd_ms = _median_ms(dd, reps)
+    dd_ms = median_ms(dd, reps, warmup=2)
 
     # One guided DD step, timed stage by stage (Table IV)
     dd_s = samplers["dd"]
@@ -158,8 +151,8 @@ def run_sampling_benchmark(settings: SamplingBenchSettings, *, models: dict | No
     def fd_guided():
         return samplers["fd"].sample(batch=1, horizon=H, conditions={0: start, -1: goal},
                                      generator=gen, guide=fd_guide)
-    fd_ms = _median_ms(fd, max(3, reps // 2))
-    fdg_ms = _median_ms(fd_guided, max(3, reps // 2))
+    fd_ms = median_ms(fd, max(3, reps // 2), warmup=2)
+    fdg_ms = median_ms(fd_guided, max(3, reps // 2), warmup=2)
 
     context = {"map": grid.name, "robot": footprint.name, "R": int(len(footprint.points)),
                "n_interp": cost_config.n_interp, "threads": torch.get_num_threads(),
