@@ -285,24 +285,29 @@ class HierarchicalPlanner:
                                    self.footprint_points, self.costmap,
                                    **self.cost_config.cost_kwargs()).collision_cost
 
-    def refine(self, start: torch.Tensor, goal: torch.Tensor, *,
-               generator: torch.Generator | None = None) -> tuple[torch.Tensor, float]:
-        """DenseDiffusion (Algorithm 2 lines 1-9) between two waypoints, with the optional
-        retry rule -> (segment (P^l, 2), its collision cost)."""
+    def refine(self, starts: torch.Tensor, goals: torch.Tensor, *,
+               generator: torch.Generator | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """DenseDiffusion (Algorithm 2 lines 1-9) for K segments in one batch, with the optional
+        retry rule. starts, goals: (K, 2) [m] -> (segments (K, P^l, 2), collision costs (K,))."""
         from ecahd_core.guidance import CostJGuide
 
-        guide = None
-        if self.dense.guidance:
-            guide = CostJGuide(self.costmap, self.footprint_points, goal[None], self.cost_config)
-        best, best_cost = None, float("inf")
+        K = starts.shape[0]
+        best = torch.zeros(K, self.dense.points, 2)
+        best_cost = torch.full((K,), float("inf"))
+        todo = torch.arange(K)
         for _ in range(1 + max(0, self.dense.retries)):
-            seg = self.dd.sample(batch=1, horizon=self.dense.points,
-                                 conditions={0: start, -1: goal}, generator=generator,
-                                 guide=guide).trajectories[0]
-            cost = float(self.local_cost(seg[None], goal[None])[0])
-            if cost < best_cost:
-                best, best_cost = seg, cost
-            if best_cost <= self.dense.c_th:
+            a, b = starts[todo], goals[todo]
+            guide = (CostJGuide(self.costmap, self.footprint_points, b, self.cost_config)
+                     if self.dense.guidance else None)
+            seg = self.dd.sample(batch=len(todo), horizon=self.dense.points,
+                                 conditions={0: a, -1: b}, generator=generator,
+                                 guide=guide).trajectories
+            cost = self.local_cost(seg, b).float().cpu()
+            better = cost < best_cost[todo]
+            best[todo[better]] = seg[better].float().cpu()
+            best_cost[todo[better]] = cost[better]
+            todo = todo[best_cost[todo] > self.dense.c_th]
+            if len(todo) == 0:
                 break
         return best, best_cost
 
@@ -315,6 +320,8 @@ class HierarchicalPlanner:
         times = {"sd": 0.0, "j_check": 0.0, "dd": 0.0}
         global_plans, segments, dd_used, costs = [], [], [], []
         frac = torch.linspace(0.0, 1.0, P_l)[:, None]
+        if self.replan == "once":
+            return self._plan_once(S, G, generator, t_total)
         remaining = None
         for p in range(P_g - 1):  # Algorithm 1 line 1 (the last iteration reaches G)
             if self.replan == "once" and remaining is not None:
@@ -334,7 +341,8 @@ class HierarchicalPlanner:
             c_after, used = c, False
             if self.dd is not None and c > self.dense.c_th:  # line 15
                 t0 = time.perf_counter()
-                local, c_after = self.refine(a, b, generator=generator)
+                seg, cost = self.refine(a[None], b[None], generator=generator)
+                local, c_after = seg[0], float(cost[0])
                 times["dd"] += (time.perf_counter() - t0) * 1e3
                 used = True
             global_plans.append(waypoints)
@@ -346,6 +354,43 @@ class HierarchicalPlanner:
         times["total"] = (time.perf_counter() - t_total) * 1e3
         return HierarchicalPlan(trajectory=traj, global_plans=global_plans, segments=segments,
                                 dd_segments=dd_used, local_costs=costs, timings_ms=times)
+
+
+    def _plan_once(self, S: torch.Tensor, G: torch.Tensor, generator, t_total: float
+                   ) -> HierarchicalPlan:
+        """Algorithm 1 with one SD plan: every iteration's local stage depends on that plan only,
+        so all straight local plans are checked by J in one batch and all segments above c_th are
+        refined by DD in one batch (the same results as iterating, P^g - 1 times fewer calls)."""
+        P_g, P_l = self.sparse.config.horizon, self.dense.points
+        times = {"sd": 0.0, "j_check": 0.0, "dd": 0.0}
+        t0 = time.perf_counter()
+        waypoints = self.sparse.plan(S.numpy(), G.numpy(), horizon=P_g,
+                                     generator=generator).waypoints
+        times["sd"] = (time.perf_counter() - t0) * 1e3
+        wp = torch.as_tensor(waypoints, dtype=torch.float32)
+        a, b = wp[:-1], wp[1:]  # (P^g - 1, 2): t^g_p[0], t^g_p[1] of every iteration
+        frac = torch.linspace(0.0, 1.0, P_l)[None, :, None]
+        local = a[:, None] + frac * (b - a)[:, None]  # (P^g - 1, P^l, 2) LocalPlan
+        t0 = time.perf_counter()
+        c = self.local_cost(local, b).float().cpu()
+        times["j_check"] = (time.perf_counter() - t0) * 1e3
+        c_after = c.clone()
+        used = (c > self.dense.c_th) if self.dd is not None else torch.zeros_like(c, dtype=torch.bool)
+        if used.any():
+            t0 = time.perf_counter()
+            idx = torch.nonzero(used).flatten()
+            seg, cost = self.refine(a[idx], b[idx], generator=generator)
+            local[idx] = seg
+            c_after[idx] = cost
+            times["dd"] = (time.perf_counter() - t0) * 1e3
+        segments = [seg.numpy().astype(np.float64) for seg in local]
+        traj = np.concatenate([segments[0]] + [sg[1:] for sg in segments[1:]])
+        times["total"] = (time.perf_counter() - t_total) * 1e3
+        return HierarchicalPlan(trajectory=traj,
+                                global_plans=[waypoints[p:] for p in range(P_g - 1)],
+                                segments=segments, dd_segments=used.tolist(),
+                                local_costs=list(zip(c.tolist(), c_after.tolist())),
+                                timings_ms=times)
 
 
 class FullDiffusion:
@@ -387,3 +432,4 @@ class FullDiffusion:
                                   conditions={0: start_t, -1: goal_t}, generator=generator,
                                   guide=guide)
         return out.trajectories[0].numpy().astype(np.float64)
+

@@ -72,3 +72,7 @@ def test_replan_once_samples_sd_once_and_follows_it():
     for p, g in enumerate(plan.global_plans):
         assert np.allclose(g, first[p:])  # the same plan, shrinking from the front
     assert np.allclose(plan.trajectory[-1], [10.5, 7.5], atol=1e-5)
+    # all segments checked and refined in one batch: DD exactly where c^l > c_th
+    assert plan.dd_segments == [c > hd.dense.c_th for c, _ in plan.local_costs]
+    for a, b in zip(plan.segments, plan.segments[1:]):
+        assert np.allclose(a[-1], b[0])
