@@ -30,6 +30,8 @@ CONSOLE_SCRIPTS = [
     "map_publisher = ecahd_ros.map_publisher:main",
     "sim_bridge = sim_bridge.node:main",
     "bag_recorder = ecahd_ros.bag_recorder:main",
+    "global_planner = ecahd_ros.global_planner:main",
+    "local_refiner = ecahd_ros.local_refiner:main",
 ]
 
 setup(

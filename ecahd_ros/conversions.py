@@ -1,10 +1,13 @@
 """Message conversion between ROS 2 messages and ecahd_core types (the only place that knows both)."""
 from __future__ import annotations
 
+import json
+
 import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Pose, PoseStamped
 from nav_msgs.msg import OccupancyGrid, Path
+from std_msgs.msg import String
 
 from ecahd_core.errors import MapError
 from ecahd_core.maps import GridMap, from_occupancy_grid, to_occupancy_grid
@@ -30,12 +33,17 @@ def grid_to_msg(grid: GridMap, stamp: Time | None = None) -> OccupancyGrid:
 
 def msg_to_grid(msg: OccupancyGrid, *, unknown_is_occupied: bool = True,
                 name: str = "occupancy_grid") -> GridMap:
-    """nav_msgs/OccupancyGrid -> GridMap; raises MapError for a malformed or rotated grid."""
+    """nav_msgs/OccupancyGrid -> GridMap; raises MapError for a malformed or rotated grid.
+
+    The message carries the resolution as float32 (0.1 arrives as 0.10000000149); it is restored
+    to the shortest decimal that float32 value stands for, so a map keeps its fingerprint (and
+    the models trained for it still load) after a trip through a message."""
     q = msg.info.origin.orientation
     if abs(q.x) > 1e-6 or abs(q.y) > 1e-6 or abs(q.z) > 1e-6:
         raise MapError("OccupancyGrid with a rotated origin is not supported")
+    resolution = float(str(np.float32(msg.info.resolution)))
     return from_occupancy_grid(np.asarray(msg.data, dtype=np.int16), msg.info.width,
-                               msg.info.height, msg.info.resolution,
+                               msg.info.height, resolution,
                                (msg.info.origin.position.x, msg.info.origin.position.y),
                                frame_id=msg.header.frame_id or "map", name=name,
                                unknown_is_occupied=unknown_is_occupied)
@@ -74,3 +82,9 @@ def pose_from_xy_yaw(x: float, y: float, yaw: float) -> Pose:
 def yaw_from_quaternion(q) -> float:
     """Heading [rad] of a geometry_msgs/Quaternion (rotation about z)."""
     return float(np.arctan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z)))
+
+
+def timing_message(stage: str, ms: float, stamp_s: float, **extra) -> String:
+    """The ``ecahd/timing`` message: std_msgs/String with JSON {"stage", "ms", "stamp", ...}."""
+    return String(data=json.dumps({"stage": stage, "ms": round(float(ms), 3), **extra,
+                                   "stamp": stamp_s}))

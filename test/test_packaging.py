@@ -8,7 +8,8 @@ from pathlib import Path
 
 
 ROOT = Path(__file__).resolve().parents[1]
-EXECUTABLES = ["ecahd", "map_publisher", "sim_bridge", "bag_recorder"]
+EXECUTABLES = ["ecahd", "map_publisher", "sim_bridge", "bag_recorder", "global_planner",
+               "local_refiner"]
 # colcon installed by the test extra lives beside this interpreter (a venv need not be on PATH)
 COLCON = shutil.which("colcon", path=os.pathsep.join([str(Path(sys.executable).parent),
                                                       os.environ.get("PATH", "")]))

@@ -63,3 +63,14 @@ def test_bad_map_is_logged_not_raised(ros_context):
                         parameter_overrides=[Parameter("map", value="no-such-map")])
     assert node.grid is None
     node.destroy_node()
+
+
+def test_float32_resolution_keeps_the_fingerprint():
+    # OccupancyGrid.info.resolution is float32: 0.1 travels as 0.10000000149; the map must keep
+    # its identity so the models trained for it still load.
+    grid = builtin_map("maze2d-large", resolution=0.1)
+    msg = grid_to_msg(grid)
+    msg.info.resolution = float(np.float32(0.1))  # what a subscriber receives
+    assert msg.info.resolution != 0.1
+    back = msg_to_grid(msg, name="maze2d-large")
+    assert back.resolution == 0.1 and back.fingerprint() == grid.fingerprint()

@@ -1,0 +1,288 @@
+"""global_planner: ECAHD's Sparse Diffusion global planner as a node (paper Sec. III-A,
+Algorithm 1 lines 2-11 with its shrinking horizon).
+
+A goal becomes a plan here: on ``goal_pose`` the node samples N candidate global plans of P^g
+waypoints from the robot's pose (``odom``) to the goal in one batch, keeps the best of N and
+publishes its waypoints on ``plan``. When the robot comes within ``waypoint_tolerance`` of the
+next waypoint p, it replans from its current pose with horizon P^g - p (Algorithm 1: the global
+plan t^g_p shrinks by one waypoint per iteration), down to the straight [pose, goal] at horizon 2.
+
+Parameters (read-only, declared in :data:`PARAMETERS`):
+    sd_model (str, ""): SD checkpoint path; "" = the shipped model for ``map_name``.
+    map_name (str, "maze2d-large"): the map's identity (an OccupancyGrid has no name); the
+        checkpoint must have been trained for this name and the received grid's fingerprint.
+    num_candidates (int, 10): N, candidates sampled in one batch.
+    horizon (int, 10): P^g, waypoints of the first global plan.
+    ddim_steps (int, 0): DDIM steps; 0 = the checkpoint's.
+    epsilon (double, 1.0): [m] goal-reaching radius of the selection rule.
+    selection (str, "shortest_reaching"): shortest_reaching (paper) or collision_aware.
+    robot (str, "circle"), footprint (str, ""), footprint_padding (double, 0.0 m): the robot.
+    global_frame (str, "map"): frame of goals and plans.
+    waypoint_tolerance (double, 0.3): [m] distance to the next waypoint that triggers a replan.
+    seed (int, 0): seed of the sampler's torch.Generator (a seed reproduces a plan sequence).
+    torch_threads (int, 1): torch.set_num_threads.
+
+Subscribes:
+    map (nav_msgs/OccupancyGrid; reliable, transient_local, depth 1): rebuilds the planner and
+        replans when a goal is active.
+    goal_pose (geometry_msgs/PoseStamped; reliable, depth 10): frame must be ``global_frame``;
+        finite, on the map and free, else logged and ignored (the current plan stays). A new
+        goal pre-empts the current one; a goal before map and odometry is queued.
+    odom (nav_msgs/Odometry; reliable, depth 10): the robot's pose in ``global_frame``.
+Publishes:
+    plan (nav_msgs/Path; reliable, transient_local, depth 1): the selected sparse waypoints,
+        first = robot pose, last = the goal exactly.
+    plan_candidates (visualization_msgs/MarkerArray; reliable, depth 1): the N candidates as
+        line strips (grey), the chosen one highlighted (purple, wider).
+    ecahd/timing (std_msgs/String; reliable, depth 10): JSON
+        ``{"stage": "sd", "ms": <float>, "horizon": <int>, "stamp": <float s>}``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from geometry_msgs.msg import Point, PoseStamped
+from nav_msgs.msg import OccupancyGrid, Odometry, Path
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import String
+from visualization_msgs.msg import Marker, MarkerArray
+
+from ecahd_core.errors import EcahdError, PlanningError
+from ecahd_core.planner import SELECTION_RULES, SparseConfig, SparseDiffusion, SparsePlan
+from ecahd_ros.conversions import msg_to_grid, timing_message, xy_to_path
+from ecahd_ros.map_publisher import MAP_QOS
+from ecahd_ros.params import (ParamSpec, declare_parameters, read_parameters, require,
+                              require_non_negative, require_positive, robot_spec)
+from ecahd_ros.spin import spin_node
+
+STREAM_QOS = QoSProfile(depth=10)  # reliable, volatile
+PLAN_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+MARKER_QOS = QoSProfile(depth=1)
+
+PARAMETERS = [
+    ParamSpec("sd_model", "", "SD checkpoint path; '' = the shipped model for map_name"),
+    ParamSpec("map_name", "maze2d-large", "name of the map on 'map' (checked against the "
+                                          "checkpoint with the grid's fingerprint)"),
+    ParamSpec("num_candidates", 10, "N, candidate global plans sampled in one batch"),
+    ParamSpec("horizon", 10, "P^g, waypoints of the first global plan"),
+    ParamSpec("ddim_steps", 0, "DDIM steps; 0 = the checkpoint's"),
+    ParamSpec("epsilon", 1.0, "[m] goal-reaching radius of the best-of-N rule"),
+    ParamSpec("selection", "shortest_reaching", f"best-of-N rule: {list(SELECTION_RULES)}"),
+    ParamSpec("robot", "circle", "footprint preset: circle, quadruped, humanoid"),
+    ParamSpec("footprint", "", "Nav2 footprint polygon '[[x, y], ...]' [m]; overrides robot"),
+    ParamSpec("footprint_padding", 0.0, "[m] grows the footprint (Nav2 footprint_padding)"),
+    ParamSpec("global_frame", "map", "frame of goals, odometry poses and plans"),
+    ParamSpec("waypoint_tolerance", 0.3, "[m] reaching the next waypoint this close replans "
+                                         "with horizon P^g - p"),
+    ParamSpec("seed", 0, "seed of the sampler's torch.Generator"),
+    ParamSpec("torch_threads", 1, "torch.set_num_threads for this process"),
+]
+
+
+@dataclass(frozen=True, kw_only=True)
+class GlobalPlannerParams:
+    """The node's validated parameters (see the module docstring for units)."""
+
+    sd_model: str
+    map_name: str
+    num_candidates: int
+    horizon: int
+    ddim_steps: int
+    epsilon: float
+    selection: str
+    robot: str
+    footprint: str
+    footprint_padding: float
+    global_frame: str
+    waypoint_tolerance: float
+    seed: int
+    torch_threads: int
+
+    def __post_init__(self) -> None:
+        require_positive(self, "num_candidates", "epsilon", "waypoint_tolerance",
+                         "torch_threads")
+        require_non_negative(self, "ddim_steps", "footprint_padding", "seed")
+        require(self.horizon >= 2, "horizon", self.horizon, ">= 2")
+        require(self.selection in SELECTION_RULES, "selection", self.selection,
+                f"one of {list(SELECTION_RULES)}")
+        require(bool(self.global_frame), "global_frame", self.global_frame, "non-empty")
+        require(bool(self.map_name), "map_name", self.map_name, "non-empty")
+
+    def sparse_config(self) -> SparseConfig:
+        return SparseConfig(num_candidates=self.num_candidates, horizon=self.horizon,
+                            epsilon=self.epsilon, selection=self.selection,
+                            num_steps=self.ddim_steps or None)
+
+
+def candidate_markers(plan: SparsePlan, frame_id: str, stamp) -> MarkerArray:
+    """SparsePlan -> MarkerArray: DELETEALL, then one LINE_STRIP per candidate (id = its index),
+    the chosen one purple and wider, the others translucent grey."""
+    out = MarkerArray()
+    clear = Marker()
+    clear.action = Marker.DELETEALL
+    out.markers.append(clear)
+    for i, cand in enumerate(plan.candidates):
+        m = Marker()
+        m.header.frame_id, m.header.stamp = frame_id, stamp
+        m.ns, m.id, m.type, m.action = "candidates", i, Marker.LINE_STRIP, Marker.ADD
+        m.pose.orientation.w = 1.0
+        chosen = i == plan.best
+        m.scale.x = 0.08 if chosen else 0.03
+        m.color.r, m.color.g, m.color.b, m.color.a = ((0.55, 0.2, 0.8, 1.0) if chosen
+                                                      else (0.5, 0.5, 0.5, 0.6))
+        for x, y in cand:
+            m.points.append(Point(x=float(x), y=float(y), z=0.0))
+        out.markers.append(m)
+    return out
+
+
+class GlobalPlanner(Node):
+    def __init__(self, **kwargs) -> None:
+        super().__init__("global_planner", **kwargs)
+        declare_parameters(self, PARAMETERS)
+        self.params: GlobalPlannerParams | None = None
+        self.grid = None
+        self.sparse: SparseDiffusion | None = None
+        self.pose: np.ndarray | None = None  # (2,) [m] latest odometry position
+        self.goal: np.ndarray | None = None  # (2,) [m] active (or queued) goal
+        self.waypoints: np.ndarray | None = None  # (P, 2) [m] current plan
+        self.iteration = 0  # p of Algorithm 1: waypoints reached since the goal arrived
+        try:
+            self.params = read_parameters(self, PARAMETERS, GlobalPlannerParams)
+            from ecahd_core.footprint import make_footprint
+
+            p = self.params
+            self.footprint = make_footprint(robot_spec(p.robot, p.footprint),
+                                            padding=p.footprint_padding)
+        except EcahdError as exc:
+            self.get_logger().error(f"global_planner cannot start: {exc}")
+            return
+        torch.set_num_threads(self.params.torch_threads)
+        self.generator = torch.Generator().manual_seed(self.params.seed)
+        self._plan_pub = self.create_publisher(Path, "plan", PLAN_QOS)
+        self._cand_pub = self.create_publisher(MarkerArray, "plan_candidates", MARKER_QOS)
+        self._timing_pub = self.create_publisher(String, "ecahd/timing", STREAM_QOS)
+        self.create_subscription(OccupancyGrid, "map", self._guard(self._on_map), MAP_QOS)
+        self.create_subscription(PoseStamped, "goal_pose", self._guard(self._on_goal),
+                                 STREAM_QOS)
+        self.create_subscription(Odometry, "odom", self._guard(self._on_odom), STREAM_QOS)
+        self.get_logger().info(f"global planner ready: N={p.num_candidates}, P^g={p.horizon}, "
+                               f"robot {self.footprint.name!r}, waiting for map and odom")
+
+    # ------------------------------------------------------------------------- callbacks
+    def _guard(self, callback):
+        """Wrap a callback so no exception escapes: EcahdError is logged as an error, anything
+        else with its traceback."""
+        def wrapped(msg) -> None:
+            try:
+                callback(msg)
+            except EcahdError as exc:
+                self.get_logger().error(str(exc))
+            except Exception:  # noqa: BLE001 (a node must survive a bug in one message)
+                import traceback
+
+                self.get_logger().error(f"{callback.__name__} failed:\n"
+                                        f"{traceback.format_exc()}")
+        return wrapped
+
+    def _on_map(self, msg: OccupancyGrid) -> None:
+        from ecahd_core.cost import CostConfig
+        from ecahd_core.model_zoo import load_model
+
+        p = self.params
+        self.sparse = None  # a map we cannot plan on leaves no stale planner behind
+        grid = msg_to_grid(msg, name=p.map_name)
+        ckpt = load_model("sd", grid, path=p.sd_model or None, footprint=self.footprint,
+                          horizon=p.horizon)
+        cost = None
+        if p.selection == "collision_aware":
+            cost_config = CostConfig()
+            cost = (cost_config.make_costmap(grid), self.footprint.points, cost_config)
+        self.sparse = SparseDiffusion(ckpt, p.sparse_config(), cost=cost)
+        self.grid = grid
+        self.get_logger().info(f"map {grid.name!r} received ({grid.width} x {grid.height} "
+                               f"cells); SD planner built")
+        if self.goal is not None and self.pose is not None:
+            self._plan_to_goal(reset=True)
+
+    def _on_goal(self, msg: PoseStamped) -> None:
+        p = self.params
+        frame = msg.header.frame_id
+        if frame != p.global_frame:
+            raise PlanningError(f"goal rejected: frame {frame!r} is not the global frame "
+                                f"{p.global_frame!r}")
+        xy = np.array([msg.pose.position.x, msg.pose.position.y], dtype=np.float64)
+        if not np.all(np.isfinite(xy)):
+            raise PlanningError(f"goal rejected: non-finite coordinates {xy.tolist()}")
+        if self.grid is not None:
+            try:
+                xy = self.grid.validate_point(xy, "goal")
+            except PlanningError as exc:
+                raise PlanningError(f"goal rejected: {exc}") from None
+        self.goal = xy
+        if self.sparse is None or self.pose is None:
+            missing = " and ".join(n for n, v in (("map", self.sparse), ("odom", self.pose))
+                                   if v is None)
+            self.get_logger().info(f"goal ({xy[0]:.2f}, {xy[1]:.2f}) queued until {missing} "
+                                   f"arrive(s)")
+            return
+        self._plan_to_goal(reset=True)
+
+    def _on_odom(self, msg: Odometry) -> None:
+        if msg.header.frame_id and msg.header.frame_id != self.params.global_frame:
+            raise PlanningError(f"odometry in frame {msg.header.frame_id!r}, expected "
+                                f"{self.params.global_frame!r}: ignored")
+        first = self.pose is None
+        self.pose = np.array([msg.pose.pose.position.x, msg.pose.pose.position.y])
+        if self.goal is None or self.sparse is None:
+            return
+        if first or self.waypoints is None:
+            self._plan_to_goal(reset=True)  # the queued goal
+            return
+        nxt = self.waypoints[1]
+        if np.linalg.norm(self.pose - nxt) >= self.params.waypoint_tolerance:
+            return
+        if len(self.waypoints) <= 2:  # the next waypoint is the goal
+            self.get_logger().info(f"goal ({self.goal[0]:.2f}, {self.goal[1]:.2f}) reached")
+            self.goal = None
+            return
+        self.iteration += 1  # Algorithm 1: MoveAgent reached t^g_p[1]; replan with P^g - p
+        self._plan_to_goal(reset=False)
+
+    # ----------------------------------------------------------------------------- planning
+    def _plan_to_goal(self, *, reset: bool) -> None:
+        """SD best-of-N from the current pose to the goal with horizon P^g - p; publish."""
+        if reset:
+            self.iteration = 0
+        horizon = max(2, self.params.horizon - self.iteration)
+        try:  # a goal queued before the map is checked here
+            self.goal = self.grid.validate_point(self.goal, "goal")
+        except PlanningError as exc:
+            self.goal = None
+            raise PlanningError(f"goal rejected: {exc}") from None
+        start = self.grid.validate_point(self.pose, "robot pose")
+        result = self.sparse.plan(start, self.goal, horizon=horizon, generator=self.generator)
+        waypoints = result.waypoints.copy()
+        waypoints[0], waypoints[-1] = start, self.goal  # exact ends (the model works in float32)
+        self.waypoints = waypoints
+        stamp = self.get_clock().now()
+        self._plan_pub.publish(xy_to_path(waypoints, self.params.global_frame, stamp.to_msg()))
+        self._cand_pub.publish(candidate_markers(result, self.params.global_frame,
+                                                 stamp.to_msg()))
+        self._timing_pub.publish(timing_message("sd", result.time_ms, stamp.nanoseconds * 1e-9,
+                                                horizon=horizon))
+        self.get_logger().info(f"plan of {horizon} waypoints to ({self.goal[0]:.2f}, "
+                               f"{self.goal[1]:.2f}) in {result.time_ms:.1f} ms "
+                               f"(candidate {result.best} of {len(result.candidates)})")
+
+
+def main(args=None) -> None:
+    spin_node(GlobalPlanner, args)
+
+
+if __name__ == "__main__":
+    main()

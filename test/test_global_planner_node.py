@@ -1,0 +1,209 @@
+"""The global_planner node in-process on maze2d-large (the shipped SD model's map): a goal becomes
+a sparse plan from the robot to the goal, bad goals are rejected without a plan, a goal before the
+map is queued, a new goal pre-empts, and reaching a waypoint replans with a shorter horizon."""
+import json
+import math
+import os
+import time
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+from geometry_msgs.msg import PoseStamped  # noqa: E402
+from nav_msgs.msg import OccupancyGrid, Odometry, Path  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from std_msgs.msg import String  # noqa: E402
+from visualization_msgs.msg import MarkerArray  # noqa: E402
+
+from ecahd_core.errors import EcahdError  # noqa: E402
+from ecahd_core.maps import builtin_map  # noqa: E402
+from ecahd_ros.conversions import grid_to_msg, path_to_xy  # noqa: E402
+from ecahd_ros.global_planner import PLAN_QOS, GlobalPlanner, GlobalPlannerParams  # noqa: E402
+from ecahd_ros.map_publisher import MAP_QOS  # noqa: E402
+
+DOMAIN_ID = 60 + os.getpid() % 30  # 60..89: no other test module uses these
+ROBOT = (1.5, 1.5)  # free corridor cell of maze2d-large
+GOAL = (6.5, 5.5)  # free, a few corridors away
+
+
+@pytest.fixture
+def ros_context():
+    context = rclpy.context.Context()
+    rclpy.init(context=context, domain_id=DOMAIN_ID)
+    yield context
+    rclpy.try_shutdown(context=context)
+
+
+class Rig:
+    """The planner, a probe node that plays map server / odometry / RViz, and an executor."""
+
+    def __init__(self, context, **params) -> None:
+        self.planner = GlobalPlanner(context=context, parameter_overrides=[
+            Parameter(k, value=v) for k, v in params.items()])
+        self.probe = rclpy.create_node("probe", context=context)
+        self.executor = SingleThreadedExecutor(context=context)
+        self.executor.add_node(self.planner)
+        self.executor.add_node(self.probe)
+        self.plans, self.markers, self.timings = [], [], []
+        self.closed = False
+        self.probe.create_subscription(Path, "plan", self.plans.append, PLAN_QOS)
+        self.probe.create_subscription(MarkerArray, "plan_candidates", self.markers.append, 10)
+        self.probe.create_subscription(String, "ecahd/timing", self.timings.append, 10)
+        self.map_pub = self.probe.create_publisher(OccupancyGrid, "map", MAP_QOS)
+        self.odom_pub = self.probe.create_publisher(Odometry, "odom", 10)
+        self.goal_pub = self.probe.create_publisher(PoseStamped, "goal_pose", 10)
+
+    def close(self) -> None:
+        if self.closed:
+            return
+        self.closed = True
+        self.executor.shutdown()
+        self.planner.destroy_node()
+        self.probe.destroy_node()
+
+    def spin_until(self, condition, timeout: float = 10.0) -> None:
+        deadline = time.monotonic() + timeout
+        while not condition():
+            assert time.monotonic() < deadline, "condition not met within the time limit"
+            self.executor.spin_once(timeout_sec=0.01)
+
+    def spin_for(self, seconds: float) -> None:
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            self.executor.spin_once(timeout_sec=0.01)
+
+    def _matched(self, pub, msg) -> None:
+        self.spin_until(lambda: pub.get_subscription_count() > 0)
+        pub.publish(msg)
+
+    def send_map(self) -> None:
+        self.map_pub.publish(grid_to_msg(builtin_map("maze2d-large")))
+
+    def send_odom(self, xy, frame: str = "map") -> None:
+        msg = Odometry()
+        msg.header.frame_id, msg.child_frame_id = frame, "base_link"
+        msg.pose.pose.position.x, msg.pose.pose.position.y = map(float, xy)
+        msg.pose.pose.orientation.w = 1.0
+        self._matched(self.odom_pub, msg)
+
+    def send_goal(self, xy, frame: str = "map") -> None:
+        msg = PoseStamped()
+        msg.header.frame_id = frame
+        msg.pose.position.x, msg.pose.position.y = map(float, xy)
+        msg.pose.orientation.w = 1.0
+        self._matched(self.goal_pub, msg)
+
+
+@pytest.fixture
+def rig(ros_context):
+    made = []
+
+    def make(**params):
+        made.append(Rig(ros_context, **params))
+        return made[-1]
+
+    yield make
+    for r in made:
+        r.close()
+
+
+def ready(rig):
+    """Map and odometry received, planner built."""
+    rig.send_map()
+    rig.send_odom(ROBOT)
+    rig.spin_until(lambda: rig.planner.sparse is not None and rig.planner.pose is not None)
+
+
+def test_goal_gives_a_plan_from_the_robot_to_the_goal(rig):
+    r = rig()
+    ready(r)
+    r.send_goal(GOAL)
+    r.spin_until(lambda: r.plans and r.markers and r.timings)
+    plan = r.plans[-1]
+    xy = path_to_xy(plan)
+    assert plan.header.frame_id == "map"
+    assert xy.shape == (10, 2)  # P^g
+    assert np.allclose(xy[0], ROBOT)  # the robot's pose, exactly
+    assert tuple(xy[-1]) == GOAL  # the goal, exactly
+    # every waypoint lies on the map
+    assert np.all((xy >= 0) & (xy <= [12.0, 9.0]))
+    markers = r.markers[-1].markers
+    assert len(markers) == 1 + 10  # DELETEALL + N candidates
+    widths = [m.scale.x for m in markers[1:]]
+    assert widths.count(max(widths)) == 1  # exactly one highlighted
+    timing = json.loads(r.timings[-1].data)
+    assert timing["stage"] == "sd" and timing["horizon"] == 10 and timing["ms"] > 0
+    assert math.isfinite(timing["stamp"])
+
+
+@pytest.mark.parametrize("goal,frame", [
+    ((0.5, 0.5), "map"),  # inside the outer wall
+    ((50.0, 50.0), "map"),  # off the map
+    ((math.nan, 5.5), "map"),  # NaN
+    (GOAL, "odom"),  # wrong frame
+])
+def test_bad_goal_is_rejected_and_the_node_keeps_working(rig, goal, frame):
+    r = rig()
+    ready(r)
+    r.send_goal(goal, frame)
+    r.spin_for(0.3)
+    assert r.plans == [] and r.planner.goal is None
+    r.send_goal(GOAL)
+    r.spin_until(lambda: r.plans)
+    assert tuple(path_to_xy(r.plans[-1])[-1]) == GOAL
+
+
+def test_goal_before_the_map_is_queued(rig):
+    r = rig()
+    r.send_odom(ROBOT)
+    r.send_goal(GOAL)
+    r.spin_for(0.2)
+    assert r.plans == [] and r.planner.goal is not None
+    r.send_map()
+    r.spin_until(lambda: r.plans)
+    xy = path_to_xy(r.plans[-1])
+    assert np.allclose(xy[0], ROBOT) and tuple(xy[-1]) == GOAL
+
+
+def test_new_goal_preempts_and_waypoints_shrink_the_horizon(rig):
+    r = rig(num_candidates=4)
+    ready(r)
+    r.send_goal(GOAL)
+    r.spin_until(lambda: r.plans)
+    other = (10.5, 7.5)
+    r.send_goal(other)
+    r.spin_until(lambda: len(r.plans) >= 2)
+    xy = path_to_xy(r.plans[-1])
+    assert tuple(xy[-1]) == other and len(xy) == 10
+    # Algorithm 1: the robot reaches the next waypoint -> replan from there with P^g - 1
+    r.send_odom(xy[1] + [0.1, 0.0])
+    r.spin_until(lambda: len(r.plans) >= 3)
+    xy2 = path_to_xy(r.plans[-1])
+    assert len(xy2) == 9 and tuple(xy2[-1]) == other
+    assert np.allclose(xy2[0], xy[1] + [0.1, 0.0])
+
+
+def test_same_seed_reproduces_the_plan(rig):
+    paths = []
+    for _ in range(2):
+        r = rig(seed=7, num_candidates=4)
+        ready(r)
+        r.send_goal(GOAL)
+        r.spin_until(lambda: r.plans)
+        paths.append(path_to_xy(r.plans[-1]))
+        r.close()
+    np.testing.assert_allclose(paths[0], paths[1], atol=1e-6)
+
+
+@pytest.mark.parametrize("name,value", [("horizon", 1), ("num_candidates", 0),
+                                        ("selection", "random"), ("epsilon", -1.0)])
+def test_bad_parameters_are_named(name, value):
+    values = dict(sd_model="", map_name="maze2d-large", num_candidates=10, horizon=10,
+                  ddim_steps=0, epsilon=1.0, selection="shortest_reaching", robot="circle",
+                  footprint="", footprint_padding=0.0, global_frame="map",
+                  waypoint_tolerance=0.3, seed=0, torch_threads=1)
+    values[name] = value
+    with pytest.raises(EcahdError, match=name):
+        GlobalPlannerParams(**values)

@@ -1,0 +1,206 @@
+"""The local_refiner node in-process on maze2d-large: a plan and odometry give forward cmd_vel
+towards the next waypoint within the limits; a segment through a wall corner is refined by DD; no
+plan, stale odometry and a reached goal give zero velocity. Plus the pure controller math."""
+import json
+import math
+import os
+import time
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+from geometry_msgs.msg import Twist, TwistStamped  # noqa: E402
+from nav_msgs.msg import OccupancyGrid, Odometry, Path  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from std_msgs.msg import String  # noqa: E402
+
+from ecahd_core.errors import EcahdError  # noqa: E402
+from ecahd_core.maps import builtin_map  # noqa: E402
+from ecahd_ros.conversions import grid_to_msg, path_to_xy, pose_from_xy_yaw, xy_to_path  # noqa: E402
+from ecahd_ros.global_planner import PLAN_QOS  # noqa: E402
+from ecahd_ros.local_refiner import (LocalRefiner, LocalRefinerParams, lookahead_point,  # noqa: E402
+                                     pure_pursuit)
+from ecahd_ros.map_publisher import MAP_QOS  # noqa: E402
+
+DOMAIN_ID = 90 + os.getpid() % 30  # 90..119: no other test module uses these
+RATE = 20.0  # [Hz] control_rate in these tests
+# maze2d-large: y in [1, 2] is free for x in [1, 3]; x in [2, 3] is free for y in [1, 4]
+PLAN = [(1.5, 1.5), (2.5, 1.5), (2.5, 2.5), (2.5, 3.5)]
+CORNER_PLAN = [(1.5, 1.5), (2.5, 2.5), (2.5, 3.5)]  # cuts wall cell [1, 2] x [2, 3]
+
+
+def params(**over) -> LocalRefinerParams:
+    values = dict(dd_model="", map_name="maze2d-large", robot="circle", footprint="",
+                  footprint_padding=0.0, global_frame="map", c_th=0.1, control_rate=10.0,
+                  max_v=0.5, max_w=1.5, max_accel=1.0, lookahead=0.4, waypoint_tolerance=0.3,
+                  goal_tolerance=0.25, stale_timeout=1.0, plan_timeout=0.0,
+                  enable_stamped_cmd_vel=False, seed=0, torch_threads=1)
+    values.update(over)
+    return LocalRefinerParams(**values)
+
+
+@pytest.fixture
+def ros_context():
+    context = rclpy.context.Context()
+    rclpy.init(context=context, domain_id=DOMAIN_ID)
+    yield context
+    rclpy.try_shutdown(context=context)
+
+
+class Rig:
+    def __init__(self, context, **over) -> None:
+        values = {"control_rate": RATE, **over}
+        self.node = LocalRefiner(context=context, parameter_overrides=[
+            Parameter(k, value=v) for k, v in values.items()])
+        self.probe = rclpy.create_node("probe", context=context)
+        self.executor = SingleThreadedExecutor(context=context)
+        self.executor.add_node(self.node)
+        self.executor.add_node(self.probe)
+        self.cmds, self.local, self.timings = [], [], []
+        stamped = values.get("enable_stamped_cmd_vel", False)
+        self.probe.create_subscription(TwistStamped if stamped else Twist, "cmd_vel",
+                                       self.cmds.append, 100)
+        self.probe.create_subscription(Path, "local_plan", self.local.append, 10)
+        self.probe.create_subscription(String, "ecahd/timing", self.timings.append, 10)
+        self.map_pub = self.probe.create_publisher(OccupancyGrid, "map", MAP_QOS)
+        self.plan_pub = self.probe.create_publisher(Path, "plan", PLAN_QOS)
+        self.odom_pub = self.probe.create_publisher(Odometry, "odom", 10)
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.probe.destroy_node()
+
+    def spin_until(self, condition, timeout: float = 10.0) -> None:
+        deadline = time.monotonic() + timeout
+        while not condition():
+            assert time.monotonic() < deadline, "condition not met within the time limit"
+            self.executor.spin_once(timeout_sec=0.01)
+
+    def send_map(self) -> None:
+        self.map_pub.publish(grid_to_msg(builtin_map("maze2d-large")))
+        self.spin_until(lambda: self.node.planner is not None)
+
+    def send_plan(self, xy) -> None:
+        self.plan_pub.publish(xy_to_path(np.asarray(xy, dtype=float), "map"))
+
+    def send_odom(self, x, y, yaw=0.0) -> None:
+        self.spin_until(lambda: self.odom_pub.get_subscription_count() > 0)
+        msg = Odometry()
+        msg.header.frame_id = "map"
+        msg.pose.pose = pose_from_xy_yaw(x, y, yaw)
+        self.odom_pub.publish(msg)
+        self.spin_until(lambda: self.node.pose is not None
+                        and self.node.pose[:2] == pytest.approx((x, y)))
+
+    def next_cmds(self, n: int) -> list:
+        start = len(self.cmds)
+        self.spin_until(lambda: len(self.cmds) >= start + n)
+        return [c.twist if isinstance(c, TwistStamped) else c for c in self.cmds[start:]]
+
+
+@pytest.fixture
+def rig(ros_context):
+    made = []
+
+    def make(**over):
+        made.append(Rig(ros_context, **over))
+        return made[-1]
+
+    yield make
+    for r in made:
+        r.close()
+
+
+# a 0.3 m square robot: 0.35 m from the corridor walls, beyond J's 0.1 m margin, so a straight
+# corridor segment costs 0 (the 0.4 m circle's outline lies within the margin: c^l ~ 18 > c_th)
+SMALL_ROBOT = "[[0.15, 0.15], [-0.15, 0.15], [-0.15, -0.15], [0.15, -0.15]]"
+
+
+def test_plan_and_odom_give_forward_motion_within_the_limits(rig):
+    r = rig(footprint=SMALL_ROBOT)
+    r.send_map()
+    r.send_odom(1.5, 1.5, 0.0)  # facing +x, the first waypoint (2.5, 1.5) straight ahead
+    r.send_plan(PLAN)
+    r.spin_until(lambda: r.local and r.timings)
+    local = path_to_xy(r.local[-1])
+    assert local.shape == (4, 2)  # P^l
+    np.testing.assert_allclose(local[[0, -1]], [[1.5, 1.5], [2.5, 1.5]])
+    timing = json.loads(r.timings[-1].data)
+    assert timing["stage"] == "j_check" and timing["c_before"] <= 0.1  # a free segment
+    cmds = r.next_cmds(8)
+    v = np.array([c.linear.x for c in cmds])
+    w = np.array([c.angular.z for c in cmds])
+    assert v[-1] > 0 and np.all(v >= 0) and np.all(v <= 0.5 + 1e-9)
+    assert np.all(np.abs(w) <= 1.5 + 1e-9) and np.all(np.abs(w) < 0.05)  # straight ahead
+    # |dv| <= max_accel / control_rate per tick, from standing
+    assert np.all(np.abs(np.diff(np.concatenate([[0.0], v]))) <= 1.0 / RATE + 1e-9)
+
+
+def test_colliding_segment_is_refined_by_dd(rig):
+    r = rig()
+    r.send_map()
+    r.send_odom(1.5, 1.5, math.pi / 4)
+    r.send_plan(CORNER_PLAN)
+    r.spin_until(lambda: r.timings)
+    timing = json.loads(r.timings[-1].data)
+    assert timing["stage"] == "dd" and timing["c_before"] > 0.1
+    assert timing["c_after"] < timing["c_before"]  # guided DD moved off the corner
+    assert r.node.dd_calls == 1
+    local = path_to_xy(r.local[-1])
+    np.testing.assert_allclose(local[[0, -1]], [[1.5, 1.5], [2.5, 2.5]], atol=1e-6)
+
+
+def test_zero_without_a_plan(rig):
+    r = rig()
+    r.send_odom(1.5, 1.5)
+    cmds = r.next_cmds(3)
+    assert all(c.linear.x == 0.0 and c.angular.z == 0.0 for c in cmds)
+
+
+def test_zero_when_odometry_goes_stale(rig):
+    r = rig(stale_timeout=0.3)
+    r.send_odom(1.5, 1.5)
+    r.send_plan(PLAN)  # no map: straight local plans, followed unchecked
+    r.spin_until(lambda: r.cmds and r.cmds[-1].linear.x > 0)
+    time.sleep(0.35)
+    cmds = r.next_cmds(3)
+    assert all(c.linear.x == 0.0 and c.angular.z == 0.0 for c in cmds)
+
+
+def test_zero_at_the_goal_and_stamped_commands(rig):
+    r = rig(enable_stamped_cmd_vel=True)
+    r.send_odom(2.5, 3.4, math.pi / 2)  # 0.1 m from the last point
+    r.send_plan(PLAN)
+    cmds = r.next_cmds(3)
+    assert all(c.linear.x == 0.0 and c.angular.z == 0.0 for c in cmds)
+    assert r.node.waypoints is None  # the plan is done
+    assert r.cmds[-1].header.frame_id == "base_link"
+
+
+def test_bad_parameter_is_named():
+    with pytest.raises(EcahdError, match="max_accel"):
+        params(max_accel=0.0)
+
+
+# --------------------------------------------------------------------------- controller
+def test_lookahead_point_walks_along_the_path():
+    path = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]])
+    # from (0.2, 0): the first resampled point >= 0.4 m away is (0.6, 0)
+    np.testing.assert_allclose(lookahead_point(path, np.array([0.2, 0.0]), 0.4), [0.6, 0.0])
+    # near the end the end itself
+    np.testing.assert_allclose(lookahead_point(path, np.array([1.0, 0.9]), 0.4), [1.0, 1.0])
+
+
+@pytest.mark.parametrize("yaw,expect_v", [(0.0, True), (math.pi, False)])
+def test_pure_pursuit_limits(yaw, expect_v):
+    p = params()
+    v, w = pure_pursuit((0.0, 0.0, yaw), np.array([1.0, 0.2]), 5.0, 0.45, 0.1, p)
+    if expect_v:  # target ahead, slightly left: forward at max_v, turning left
+        assert v == pytest.approx(0.5) and 0 < w <= 1.5
+        # w = v * 2 sin(alpha) / L with alpha = atan2(0.2, 1), L = hypot(1, 0.2)
+        assert w == pytest.approx(0.5 * 2 * math.sin(math.atan2(0.2, 1.0)) / math.hypot(1, 0.2))
+    else:  # target behind: slow down within max_accel and turn on the spot
+        assert v == pytest.approx(0.35) and abs(w) == pytest.approx(1.5)
