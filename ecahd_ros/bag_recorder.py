@@ -37,7 +37,6 @@ from functools import partial
 from pathlib import Path
 
 import rclpy
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -47,6 +46,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 from rosbags.typesys import Stores, get_typestore
 
 from ecahd_core.errors import EcahdError, BagError
+from ecahd_ros.params import ParamSpec, declare_parameters
 from ecahd_ros.spin import spin_node
 
 BAG_VERSION = 9  # rosbag2 metadata version of Jazzy (offered_qos_profiles as a list)
@@ -55,14 +55,14 @@ STORAGES = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
 DEFAULT_TOPICS = ["map", "goal_pose", "odom", "plan", "local_plan", "cmd_vel", "collision",
                   "ecahd/timing"]
 
-# name: (default, description); one place for every parameter of the node
-PARAMETERS: dict[str, tuple[object, str]] = {
-    "output": ("", "bag directory to create (must not exist); empty: rosbag2_<date>-<time>"),
-    "topics": (DEFAULT_TOPICS, "topics to record"),
-    "latched_topics": (["map"], "topics subscribed transient_local (latched, like Nav2's map)"),
-    "storage": ("mcap", f"rosbag2 storage plugin: {' or '.join(STORAGES)}"),
-    "discovery_period": (0.5, "[s, wall time] how often unadvertised topics are looked up"),
-}
+# one place for every parameter of the node
+PARAMETERS = [
+    ParamSpec("output", "", "bag directory to create (must not exist); empty: rosbag2_<date>-<time>"),
+    ParamSpec("topics", DEFAULT_TOPICS, "topics to record"),
+    ParamSpec("latched_topics", ["map"], "topics subscribed transient_local (latched, like Nav2's map)"),
+    ParamSpec("storage", "mcap", f"rosbag2 storage plugin: {' or '.join(STORAGES)}"),
+    ParamSpec("discovery_period", 0.5, "[s, wall time] how often unadvertised topics are looked up"),
+]
 
 
 
@@ -88,16 +88,9 @@ class BagRecorderParams:
             raise BagError(f"output {self.output!r} exists already; a bag is never overwritten")
 
 
-def declare_parameters(node: Node) -> None:
-    for name, (default, description) in PARAMETERS.items():
-        node.declare_parameter(name, default, ParameterDescriptor(
-            description=description, read_only=True,
-            dynamic_typing=isinstance(default, float)))
-
-
-def read_parameters(node: Node) -> BagRecorderParams:
+def read_bag_parameters(node: Node) -> BagRecorderParams:
     """Read and validate; raises BagError naming the first bad value."""
-    values = {name: node.get_parameter(name).value for name in PARAMETERS}
+    values = {spec.name: node.get_parameter(spec.name).value for spec in PARAMETERS}
     period = values["discovery_period"]
     if isinstance(period, bool) or not isinstance(period, (int, float)):
         raise BagError(f"discovery_period must be a number, got {period!r}")
@@ -137,7 +130,7 @@ def to_bag_qos(qos: QoSProfile) -> Qos:
 class BagRecorder(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("bag_recorder", **kwargs)
-        declare_parameters(self)
+        declare_parameters(self, PARAMETERS)
         self.params: BagRecorderParams | None = None
         self.typestore = get_typestore(TYPESTORE)
         self.received: dict[str, int] = {}  # per topic, messages handed to a callback
@@ -149,7 +142,7 @@ class BagRecorder(Node):
         self._recording = {}
         self._timer = None
         try:
-            self.params = read_parameters(self)
+            self.params = read_bag_parameters(self)
             self.bag_path = Path(self.params.output)
             self._writer = Writer(self.bag_path, version=BAG_VERSION,
                                   storage_plugin=STORAGES[self.params.storage])

@@ -26,6 +26,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "train": ("ecahd_core.commands.train", "train one diffusion model (sd, dd, fd) on a dataset"),
     "train-all": ("ecahd_core.commands.train:all",
                   "dataset + all models of a map, seeded (reproduces the shipped models)"),
+    "config": ("ecahd_ros.config_doc", "print / write the parameters of every node as ROS YAML"),
     "bench": ("ecahd_core.commands.bench", "run a benchmark and print ratios against a reference"),
 }
 

@@ -13,27 +13,28 @@ from __future__ import annotations
 import rclpy
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from rcl_interfaces.msg import ParameterDescriptor
 from nav_msgs.msg import OccupancyGrid
 
 from ecahd_core.errors import EcahdError
 from ecahd_core.maps import GridMap, load_map
 from ecahd_ros.conversions import grid_to_msg
+from ecahd_ros.params import ParamSpec, declare_parameters
 from ecahd_ros.spin import spin_node
 
 MAP_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
+PARAMETERS = [
+    ParamSpec("map", "maze2d-large", "built-in maze name or path to a Nav2 map YAML"),
+    ParamSpec("resolution", 0.1, "[m/cell] rasterisation of built-in mazes"),
+    ParamSpec("frame_id", "map", "frame of the published grid"),
+]
+
 
 class MapPublisher(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("map_publisher", **kwargs)
-        self.declare_parameter("map", "maze2d-large", ParameterDescriptor(
-            description="built-in maze name or path to a Nav2 map YAML"))
-        self.declare_parameter("resolution", 0.1, ParameterDescriptor(
-            description="[m/cell] rasterisation of built-in mazes"))
-        self.declare_parameter("frame_id", "map", ParameterDescriptor(
-            description="frame of the published grid"))
+        declare_parameters(self, PARAMETERS)
         self._pub = self.create_publisher(OccupancyGrid, "map", MAP_QOS)
         self.grid: GridMap | None = None
         try:

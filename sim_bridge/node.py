@@ -45,7 +45,6 @@ import rclpy
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseWithCovarianceStamped, Twist, TwistStamped
 from nav_msgs.msg import OccupancyGrid, Odometry
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
@@ -56,6 +55,7 @@ from std_msgs.msg import Bool
 from ecahd_core.errors import EcahdError
 from ecahd_ros.conversions import grid_to_msg, pose_from_xy_yaw, yaw_from_quaternion
 from ecahd_ros.map_publisher import MAP_QOS
+from ecahd_ros.params import ParamSpec, declare_parameters, read_parameters
 from ecahd_ros.spin import spin_node
 from sim_bridge.sim import MazeSim, SimConfig, SimError, SimState
 
@@ -65,25 +65,25 @@ BASE_FRAME = "base_link"
 STREAM_QOS = QoSProfile(depth=10)  # reliable, volatile
 CAMERA_QOS = QoSProfile(depth=1)
 
-# name: (default, description); one place for every parameter of the node
-PARAMETERS: dict[str, tuple[object, str]] = {
-    "map": ("maze2d-large", "built-in maze (maze2d-umaze, maze2d-medium, maze2d-large) or Nav2 "
+# one place for every parameter of the node
+PARAMETERS = [
+    ParamSpec("map", "maze2d-large", "built-in maze (maze2d-umaze, maze2d-medium, maze2d-large) or Nav2 "
                             "map YAML path"),
-    "resolution": (0.1, "[m/cell] rasterisation of built-in mazes"),
-    "robot": ("circle", "footprint preset: circle, quadruped, humanoid"),
-    "footprint": ("", "Nav2 footprint polygon '[[x, y], ...]' [m]; overrides robot when set"),
-    "start_x": (1.5, "[m] initial x in the map frame"),
-    "start_y": (1.5, "[m] initial y in the map frame"),
-    "start_yaw": (0.0, "[rad] initial heading"),
-    "rate_hz": (50.0, "simulation steps per second of simulated time"),
-    "control_timeout": (0.5, "[s of sim time] a cmd_vel older than this stops the robot"),
-    "max_v": (1.0, "[m/s] limit on |linear velocity|"),
-    "max_w": (2.0, "[rad/s] limit on |angular velocity|"),
-    "realtime_factor": (1.0, "simulated seconds per wall second; 0 or less = as fast as possible"),
-    "publish_camera": (False, "publish a top-down rgb8 image on camera/image_raw"),
-    "camera_rate_hz": (1.0, "[Hz of sim time] top-down image rate"),
-    "enable_stamped_cmd_vel": (False, "cmd_vel is geometry_msgs/TwistStamped instead of Twist"),
-}
+    ParamSpec("resolution", 0.1, "[m/cell] rasterisation of built-in mazes"),
+    ParamSpec("robot", "circle", "footprint preset: circle, quadruped, humanoid"),
+    ParamSpec("footprint", "", "Nav2 footprint polygon '[[x, y], ...]' [m]; overrides robot when set"),
+    ParamSpec("start_x", 1.5, "[m] initial x in the map frame"),
+    ParamSpec("start_y", 1.5, "[m] initial y in the map frame"),
+    ParamSpec("start_yaw", 0.0, "[rad] initial heading"),
+    ParamSpec("rate_hz", 50.0, "simulation steps per second of simulated time"),
+    ParamSpec("control_timeout", 0.5, "[s of sim time] a cmd_vel older than this stops the robot"),
+    ParamSpec("max_v", 1.0, "[m/s] limit on |linear velocity|"),
+    ParamSpec("max_w", 2.0, "[rad/s] limit on |angular velocity|"),
+    ParamSpec("realtime_factor", 1.0, "simulated seconds per wall second; 0 or less = as fast as possible"),
+    ParamSpec("publish_camera", False, "publish a top-down rgb8 image on camera/image_raw"),
+    ParamSpec("camera_rate_hz", 1.0, "[Hz of sim time] top-down image rate"),
+    ParamSpec("enable_stamped_cmd_vel", False, "cmd_vel is geometry_msgs/TwistStamped instead of Twist"),
+]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -126,27 +126,9 @@ class SimBridgeParams:
         return 1.0 / (self.rate_hz * self.realtime_factor)
 
 
-def declare_parameters(node: Node) -> None:
-    """Declare every parameter once, read-only, with its description. Numbers accept integer
-    overrides (``-p rate_hz:=100``) and are checked in :func:`read_parameters`."""
-    for name, (default, description) in PARAMETERS.items():
-        numeric = isinstance(default, float)
-        node.declare_parameter(name, default, ParameterDescriptor(
-            description=description, read_only=True, dynamic_typing=numeric))
-
-
-def read_parameters(node: Node) -> SimBridgeParams:
-    """Read and validate; raises SimError naming the first bad value."""
-    values = {}
-    for name, (default, _) in PARAMETERS.items():
-        value = node.get_parameter(name).value
-        if isinstance(default, float):
-            if (isinstance(value, bool) or not isinstance(value, (int, float))
-                    or not math.isfinite(value)):
-                raise SimError(f"parameter {name} must be a finite number, got {value!r}")
-            value = float(value)
-        values[name] = value
-    return SimBridgeParams(**values)
+def read_sim_parameters(node: Node) -> SimBridgeParams:
+    """Read and validate; raises EcahdError (SimError for ranges) naming the first bad value."""
+    return read_parameters(node, PARAMETERS, SimBridgeParams)
 
 
 def stamp(t: float) -> Time:
@@ -158,7 +140,7 @@ def stamp(t: float) -> Time:
 class SimBridge(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("sim_bridge", **kwargs)
-        declare_parameters(self)
+        declare_parameters(self, PARAMETERS)
         self.params: SimBridgeParams | None = None
         self.sim: MazeSim | None = None
         self.rejected_commands = 0  # cmd_vel messages ignored as malformed
@@ -166,7 +148,7 @@ class SimBridge(Node):
         self._cmd_time: float | None = None  # [s of sim time] when _cmd arrived
         self._next_camera_t = 0.0
         try:
-            self.params = read_parameters(self)
+            self.params = read_sim_parameters(self)
             self.sim = MazeSim(self.params.sim_config())
         except EcahdError as exc:
             self.get_logger().error(f"sim_bridge cannot start: {exc}")
