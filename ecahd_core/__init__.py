@@ -9,7 +9,13 @@ Modules, by question:
 - ``collision``   the exact (non-differentiable) swept-footprint collision checker for evaluation
 - ``astar``       A* with footprint clearance, the expert and the classical baseline
 - ``dataset``     expert data for the SD / DD / FD models (Sec. IV-A)
-- ``bench``       benchmark commands
+- ``diffusion``   noise schedule + DDIM, Transformer denoiser, sampler (inpainting, guidance), training
+- ``guidance``    the cost J as a guide for the sampler (Algorithm 2 line 5)
+- ``model_zoo``   training recipes, shipped models and their identity checks
+- ``planner``     SparseDiffusion (best of N), HierarchicalPlanner (Algorithms 1-2), FullDiffusion
+- ``problems``    seeded held-out benchmark problems
+- ``viz``         figures
+- ``bench``       benchmarks; ``commands``: the ``ecahd`` subcommands that need no ROS
 """
 
 __version__ = "0.1.0"
