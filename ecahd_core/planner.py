@@ -322,16 +322,11 @@ class HierarchicalPlanner:
         frac = torch.linspace(0.0, 1.0, P_l)[:, None]
         if self.replan == "once":
             return self._plan_once(S, G, generator, t_total)
-        remaining = None
         for p in range(P_g - 1):  # Algorithm 1 line 1 (the last iteration reaches G)
-            if self.replan == "once" and remaining is not None:
-                waypoints = remaining  # the first plan's waypoints not yet reached
-            else:
-                t0 = time.perf_counter()
-                waypoints = self.sparse.plan(S.numpy(), G.numpy(), horizon=P_g - p,
-                                             generator=generator).waypoints
-                times["sd"] += (time.perf_counter() - t0) * 1e3
-            remaining = waypoints[1:]
+            t0 = time.perf_counter()
+            waypoints = self.sparse.plan(S.numpy(), G.numpy(), horizon=P_g - p,
+                                         generator=generator).waypoints  # lines 2-12
+            times["sd"] += (time.perf_counter() - t0) * 1e3
             wp = torch.as_tensor(waypoints, dtype=torch.float32)
             a, b = wp[0], wp[1]
             local = a + frac * (b - a)  # LocalPlan(t^g[0], t^g[1]): (P^l, 2)
@@ -354,7 +349,6 @@ class HierarchicalPlanner:
         times["total"] = (time.perf_counter() - t_total) * 1e3
         return HierarchicalPlan(trajectory=traj, global_plans=global_plans, segments=segments,
                                 dd_segments=dd_used, local_costs=costs, timings_ms=times)
-
 
     def _plan_once(self, S: torch.Tensor, G: torch.Tensor, generator, t_total: float
                    ) -> HierarchicalPlan:
