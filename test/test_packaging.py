@@ -52,6 +52,9 @@ def test_colcon_build_installs_ros2_run_layout(tmp_path):
         assert os.access(lib / exe, os.X_OK), f"{exe} missing from {lib}"
     share = install / "ecahd_ros" / "share"
     assert (share / "ecahd_ros" / "package.xml").is_file()
+    assert (share / "ecahd_ros" / "launch" / "ecahd_sim.launch.py").is_file()
+    assert (share / "ecahd_ros" / "config" / "ecahd.yaml").is_file()
+    assert (share / "ecahd_ros" / "config" / "maps" / "maze2d-large.yaml").is_file()
     assert (share / "ament_index" / "resource_index" / "packages" / "ecahd_ros").is_file()
     site = next((install / "ecahd_ros" / "lib").glob("python3*/site-packages"))
     env = dict(os.environ, PYTHONPATH=str(site))
