@@ -14,7 +14,8 @@ from ecahd_core.footprint import Footprint
 from ecahd_core.maps import GridMap
 
 
-def _pyplot():
+def pyplot():
+    """matplotlib.pyplot on the Agg backend (PNG files, no display)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -94,7 +95,7 @@ class PlanFigure:
 def save_figures(figures: list[PlanFigure], path: str | Path, *, cols: int = 1,
                  panel_size: float = 6.0, dpi: int = 110) -> Path:
     """Draw panels in a grid and save a PNG; returns the path."""
-    plt = _pyplot()
+    plt = pyplot()
     n = len(figures)
     cols = max(1, min(cols, n))
     rows = (n + cols - 1) // cols

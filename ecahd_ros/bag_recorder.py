@@ -258,6 +258,11 @@ class BagRecorder(Node):
         if self.pending_topics:
             self.get_logger().warning(f"never advertised, not recorded: {self.pending_topics}")
 
+    @property
+    def recording(self) -> bool:
+        """The bag is open and being written."""
+        return self._writer is not None
+
     def destroy_node(self) -> None:
         self.close()
         super().destroy_node()

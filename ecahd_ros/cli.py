@@ -4,7 +4,8 @@
     ecahd map       describe a map, export it as Nav2 YAML + PGM, draw it
     ecahd dataset   generate A* expert data for training
     ecahd train     train one diffusion model;  ecahd train-all: a map's dataset and all models
-    ecahd bench     benchmarks (cost, ...)
+    ecahd bench     benchmarks (cost, sampling, sd-quality, planning)
+    ecahd demo      the closed loop in simulation, recorded and scored;  ecahd eval-bag: score a bag
 
 Subcommand modules keep their heavy imports (torch, rclpy) inside ``run``, so building the parser
 is fast and ``ecahd bench cost`` never loads rclpy.
@@ -26,6 +27,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "train": ("ecahd_core.commands.train", "train one diffusion model (sd, dd, fd) on a dataset"),
     "train-all": ("ecahd_core.commands.train:all",
                   "dataset + all models of a map, seeded (reproduces the shipped models)"),
+    "demo": ("ecahd_ros.demo",
+             "run the ROS 2 graph through seeded goals, record a bag and score it (Table III)"),
+    "eval-bag": ("ecahd_ros.eval_bag",
+                 "Table III metrics of a recorded closed-loop bag (JSON, markdown, PNG)"),
     "config": ("ecahd_ros.config_doc", "print / write the parameters of every node as ROS YAML"),
     "bench": ("ecahd_core.commands.bench", "run a benchmark and print ratios against a reference"),
 }

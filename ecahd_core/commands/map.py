@@ -29,9 +29,9 @@ def run(args: argparse.Namespace) -> int:
         path = save_nav2_yaml(grid, args.export)
         print(f"exported Nav2 map: {path} (+ {path.with_suffix('.pgm').name})")
     if args.png:
-        from ecahd_core.viz import _pyplot, draw_map
+        from ecahd_core.viz import pyplot, draw_map
 
-        plt = _pyplot()
+        plt = pyplot()
         fig, ax = plt.subplots(figsize=(6, 6 * (ymax - ymin) / (xmax - xmin) + 0.5))
         draw_map(ax, grid)
         ax.set_title(grid.name)

@@ -1,0 +1,276 @@
+"""Closed-loop navigation metrics of the paper's Table III (Sec. IV-C), from plain arrays.
+
+An *episode* starts when a goal is sent and ends when the next goal is sent (or the recording
+ends). Its inputs are what the ROS graph records: odometry samples, the simulator's per-step
+contact flags, the planners' timing records and the count of cmd_vel messages; nothing here
+imports rclpy, so ``ecahd eval-bag`` and tests share it.
+
+Metrics (D4RL maze2d-large-v1 conventions, as the paper uses them):
+
+- Episode Reward: the sparse maze2d reward, 1 for every control step after which the robot is
+  within ``goal_radius`` (0.5 m) of the goal, over at most ``max_steps`` (800) control steps.
+  A control step is one control period (0.1 s of simulated time at the local refiner's 10 Hz);
+  the state after step k (k = 1, 2, ...) is the latest odometry sample at or before
+  t_0 + k * period, t_0 the episode's first odometry stamp.
+- First Reach: the first k whose state is within ``goal_radius``; None if never.
+- Collision Rate: the percentage of simulation steps whose contact flag is set (the ``collision``
+  topic, one flag per step). Separately, the driven path (odometry x, y, yaw) is judged by the
+  exact swept-footprint checker (``collision.check_collision``): collision free or not, and the
+  fraction of its dense poses that penetrate a wall.
+- Inference Time: the sum of the episode's planning timing records [ms] / 1000, in seconds.
+- reached: the goal was within ``goal_radius`` at some control step.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from ecahd_core.errors import TrajectoryError
+from ecahd_core.footprint import Footprint
+from ecahd_core.maps import GridMap
+
+GOAL_RADIUS = 0.5  # [m] maze2d "within reach" radius of the sparse reward
+MAX_STEPS = 800  # control steps per episode in maze2d-large-v1
+CONTROL_PERIOD = 0.1  # [s of sim time] the local refiner's 10 Hz
+_STILL = 1e-6  # [m] odometry samples closer than this to the previous one are dropped
+
+
+@dataclass(frozen=True)
+class PaperRow:
+    """One row of the paper's Table III (maze2d-large, circular robot)."""
+
+    episode_reward: float
+    first_reach: float
+    collision_rate: float  # [%] of simulation steps in contact
+    inference_time_s: float  # [s] per episode
+
+
+PAPER_TABLE_III: dict[str, PaperRow] = {
+    "ECAHD w/ DD": PaperRow(46.862, 182.797, 0.0921, 1.994),
+    "ECAHD w/o DD": PaperRow(37.969, 187.977, 0.1062, 1.963),
+    "Diffuser": PaperRow(34.820, 569.414, 0.1820, 2.762),
+    "DiPPeR": PaperRow(67.672, 676.422, 0.1551, 2.364),
+    "LDP+A*": PaperRow(55.516, 570.281, 0.0940, 12.501),
+}
+
+
+@dataclass
+class EpisodeData:
+    """The raw inputs of one episode (plain arrays, times in seconds).
+
+    Attributes:
+        goal: (2,) [m] the goal in the map frame.
+        odom: (N, 4) t [s of sim time], x [m], y [m], yaw [rad], in time order.
+        collisions: (M,) bool, one contact flag per simulation step.
+        timing_ms: (T,) [ms] planning times of the episode (SD, J check, DD).
+        timing_stages: (T,) stage names ("sd", "j_check", "dd"), for the breakdown.
+        cmd_vel_count: cmd_vel messages in the episode (informative; steps come from odom).
+        start_time: [s] the episode's start on the recording's clock (informative).
+    """
+
+    goal: np.ndarray
+    odom: np.ndarray
+    collisions: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    timing_ms: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    timing_stages: list[str] = field(default_factory=list)
+    cmd_vel_count: int = 0
+    start_time: float = 0.0
+
+
+@dataclass(frozen=True)
+class EpisodeMetrics:
+    """Table III metrics of one episode (plus what they were computed from)."""
+
+    index: int
+    goal: tuple[float, float]
+    episode_reward: int
+    first_reach: int | None
+    collision_rate: float  # [%] of sim steps in contact
+    inference_time_s: float
+    reached: bool
+    control_steps: int  # steps evaluated (<= max_steps)
+    sim_steps: int
+    contact_steps: int
+    path_collision_free: bool | None  # exact checker on the driven path; None: not checked
+    penetration_fraction: float | None
+    path_length: float  # [m] driven
+    final_distance: float  # [m] to the goal at the last odometry sample
+    duration_s: float  # [s of sim time]
+    cmd_vel_count: int
+    dd_calls: int
+    stage_ms: dict[str, float]
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class Summary:
+    """Means over episodes; first_reach over the episodes that reached (None if none did)."""
+
+    episodes: int
+    episode_reward: float
+    first_reach: float | None
+    collision_rate: float
+    inference_time_s: float
+    reached: float  # fraction of episodes that reached the goal
+    path_collision_free: float | None  # fraction judged collision free by the exact checker
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+# ------------------------------------------------------------------------------ metrics
+def states_at_control_steps(odom: np.ndarray, *, period: float = CONTROL_PERIOD,
+                            max_steps: int = MAX_STEPS) -> np.ndarray:
+    """(N, 4) odometry -> (K, 2) x, y after each control step k = 1..K, K the whole periods
+    the odometry spans (at most max_steps); the state after step k is the latest sample at or
+    before t_0 + k * period."""
+    odom = np.asarray(odom, dtype=np.float64).reshape(-1, 4)
+    if len(odom) == 0:
+        return np.zeros((0, 2))
+    t = odom[:, 0]
+    span = t[-1] - t[0]
+    k = min(int(math.floor(span / period + 1e-9)), max_steps)
+    step_t = t[0] + period * np.arange(1, k + 1)
+    idx = np.searchsorted(t, step_t + 1e-9, side="right") - 1  # latest sample at or before
+    return odom[idx, 1:3]
+
+
+def evaluate_episode(data: EpisodeData, *, index: int = 0, grid: GridMap | None = None,
+                     footprint: Footprint | None = None, goal_radius: float = GOAL_RADIUS,
+                     max_steps: int = MAX_STEPS,
+                     period: float = CONTROL_PERIOD) -> EpisodeMetrics:
+    """Table III metrics of one episode; the exact path check runs when grid and footprint are
+    given. Raises TrajectoryError for a malformed goal or odometry."""
+    goal = np.asarray(data.goal, dtype=np.float64).reshape(-1)
+    if goal.shape != (2,) or not np.all(np.isfinite(goal)):
+        raise TrajectoryError(f"episode goal must be a finite (2,) point, got {data.goal!r}")
+    odom = np.asarray(data.odom, dtype=np.float64).reshape(-1, 4)
+    if len(odom) and np.any(np.diff(odom[:, 0]) < 0):
+        raise TrajectoryError("episode odometry must be in time order")
+    states = states_at_control_steps(odom, period=period, max_steps=max_steps)  # (K, 2)
+    within = np.linalg.norm(states - goal, axis=1) < goal_radius  # (K,)
+    hits = np.flatnonzero(within)
+    collisions = np.asarray(data.collisions, dtype=bool).reshape(-1)
+    timing = np.asarray(data.timing_ms, dtype=np.float64).reshape(-1)
+    stage_ms: dict[str, float] = {}
+    for stage, ms in zip(data.timing_stages, timing):
+        stage_ms[stage] = stage_ms.get(stage, 0.0) + float(ms)
+    free = penetration = None
+    xy = odom[:, 1:3]
+    if grid is not None and footprint is not None and len(odom):
+        from ecahd_core.collision import check_collision
+
+        keep = np.concatenate([[True], np.linalg.norm(np.diff(xy, axis=0), axis=1) > _STILL])
+        report = check_collision(xy[keep], footprint, grid, headings=odom[keep, 3])
+        free, penetration = report.collision_free, report.penetration_fraction
+    return EpisodeMetrics(
+        index=index, goal=(float(goal[0]), float(goal[1])),
+        episode_reward=int(within.sum()),
+        first_reach=int(hits[0]) + 1 if hits.size else None,
+        collision_rate=100.0 * float(collisions.mean()) if collisions.size else 0.0,
+        inference_time_s=float(timing.sum()) / 1000.0,
+        reached=bool(hits.size),
+        control_steps=len(states), sim_steps=int(collisions.size),
+        contact_steps=int(collisions.sum()),
+        path_collision_free=free, penetration_fraction=penetration,
+        path_length=float(np.linalg.norm(np.diff(xy, axis=0), axis=1).sum()) if len(xy) else 0.0,
+        final_distance=float(np.linalg.norm(xy[-1] - goal)) if len(xy) else float("nan"),
+        duration_s=float(odom[-1, 0] - odom[0, 0]) if len(odom) else 0.0,
+        cmd_vel_count=int(data.cmd_vel_count),
+        dd_calls=sum(1 for s in data.timing_stages if s == "dd"),
+        stage_ms=stage_ms)
+
+
+def summarize(metrics: list[EpisodeMetrics]) -> Summary:
+    """Means over the episodes (all NaN-free; first_reach over reaching episodes only)."""
+    n = len(metrics)
+    if n == 0:
+        return Summary(0, 0.0, None, 0.0, 0.0, 0.0, None)
+    reach = [m.first_reach for m in metrics if m.first_reach is not None]
+    checked = [m.path_collision_free for m in metrics if m.path_collision_free is not None]
+    return Summary(
+        episodes=n,
+        episode_reward=float(np.mean([m.episode_reward for m in metrics])),
+        first_reach=float(np.mean(reach)) if reach else None,
+        collision_rate=float(np.mean([m.collision_rate for m in metrics])),
+        inference_time_s=float(np.mean([m.inference_time_s for m in metrics])),
+        reached=float(np.mean([m.reached for m in metrics])),
+        path_collision_free=float(np.mean(checked)) if checked else None)
+
+
+# ---------------------------------------------------------------------------- splitting
+def episode_index(goal_times, times) -> np.ndarray:
+    """Which episode each time belongs to: i for goal_times[i] <= t < goal_times[i + 1], -1
+    before the first goal. goal_times must be sorted."""
+    goal_times = np.asarray(goal_times, dtype=np.float64).reshape(-1)
+    if np.any(np.diff(goal_times) < 0):
+        raise TrajectoryError("goal times must be in time order")
+    return np.searchsorted(goal_times, np.asarray(times, dtype=np.float64), side="right") - 1
+
+
+def split_episodes(goals, odom, *, collisions=None, timing=None,
+                   cmd_vel_times=None) -> list[EpisodeData]:
+    """Cut a recording into episodes at its goals.
+
+    Args:
+        goals: (G, 3) receive time [s], x, y [m] of each goal, in time order.
+        odom: (N, 5) receive time [s], stamp [s of sim time], x, y, yaw.
+        collisions: (M, 2) receive time [s], flag (0/1).
+        timing: list of (receive time [s], ms, stage).
+        cmd_vel_times: (C,) receive times [s].
+    All receive times are on the one clock of the recording; data before the first goal is
+    dropped.
+    """
+    goals = np.asarray(goals, dtype=np.float64).reshape(-1, 3)
+    odom = np.asarray(odom, dtype=np.float64).reshape(-1, 5)
+    collisions = np.asarray(collisions if collisions is not None else [],
+                            dtype=np.float64).reshape(-1, 2)
+    timing = list(timing or [])
+    cmd_t = np.asarray(cmd_vel_times if cmd_vel_times is not None else [], dtype=np.float64)
+    g = goals[:, 0]
+    o_ep = episode_index(g, odom[:, 0])
+    c_ep = episode_index(g, collisions[:, 0])
+    t_ep = episode_index(g, [t for t, _, _ in timing])
+    v_ep = episode_index(g, cmd_t)
+    episodes = []
+    for i, (t0, x, y) in enumerate(goals):
+        ours = [k for k, e in enumerate(t_ep) if e == i]
+        episodes.append(EpisodeData(
+            goal=np.array([x, y]), odom=odom[o_ep == i, 1:5],
+            collisions=collisions[c_ep == i, 1] > 0.5,
+            timing_ms=np.array([timing[k][1] for k in ours], dtype=np.float64),
+            timing_stages=[str(timing[k][2]) for k in ours],
+            cmd_vel_count=int(np.sum(v_ep == i)), start_time=float(t0)))
+    return episodes
+
+
+# ------------------------------------------------------------------------------- tables
+def _fmt(value, digits: int) -> str:
+    return "-" if value is None else f"{value:.{digits}f}"
+
+
+def markdown_table(summary: Summary, metrics: list[EpisodeMetrics], *,
+                   label: str = "this run (ROS 2 closed loop)") -> str:
+    """A markdown table of this run's means next to Table III, then one row per episode."""
+    lines = ["| Method | Episode Reward | First Reach | Collision Rate [%] | Inference Time [s] |",
+             "|---|---:|---:|---:|---:|",
+             f"| **{label}** | {summary.episode_reward:.3f} | {_fmt(summary.first_reach, 3)} | "
+             f"{summary.collision_rate:.4f} | {summary.inference_time_s:.3f} |"]
+    for name, row in PAPER_TABLE_III.items():
+        lines.append(f"| {name} (paper) | {row.episode_reward:.3f} | {row.first_reach:.3f} | "
+                     f"{row.collision_rate:.4f} | {row.inference_time_s:.3f} |")
+    lines += ["", "| Episode | Goal | Reward | First Reach | Collision Rate [%] | Exact check "
+              "| Inference [s] | Reached | Steps | DD calls |",
+              "|---:|---|---:|---:|---:|---|---:|---|---:|---:|"]
+    for m in metrics:
+        exact = ("-" if m.path_collision_free is None else
+                 "free" if m.path_collision_free else f"hit ({100 * m.penetration_fraction:.1f}%)")
+        lines.append(f"| {m.index} | ({m.goal[0]:.2f}, {m.goal[1]:.2f}) | {m.episode_reward} | "
+                     f"{_fmt(m.first_reach, 0)} | {m.collision_rate:.4f} | {exact} | "
+                     f"{m.inference_time_s:.3f} | {'yes' if m.reached else 'no'} | "
+                     f"{m.control_steps} | {m.dd_calls} |")
+    return "\n".join(lines) + "\n"
