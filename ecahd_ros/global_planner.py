@@ -78,6 +78,8 @@ PARAMETERS = [
     ParamSpec("global_frame", "map", "frame of goals, odometry poses and plans"),
     ParamSpec("waypoint_tolerance", 0.3, "[m] reaching the next waypoint this close replans "
                                          "with horizon P^g - p"),
+    ParamSpec("replan_timeout", 5.0, "[s] with no waypoint reached for this long, replan from "
+                                     "the current pose (same horizon); 0 = never"),
     ParamSpec("seed", 0, "seed of the sampler's torch.Generator"),
     ParamSpec("torch_threads", 1, "torch.set_num_threads for this process"),
 ]
@@ -99,13 +101,14 @@ class GlobalPlannerParams:
     footprint_padding: float
     global_frame: str
     waypoint_tolerance: float
+    replan_timeout: float
     seed: int
     torch_threads: int
 
     def __post_init__(self) -> None:
         require_positive(self, "num_candidates", "epsilon", "waypoint_tolerance",
                          "torch_threads")
-        require_non_negative(self, "ddim_steps", "footprint_padding", "seed")
+        require_non_negative(self, "ddim_steps", "footprint_padding", "seed", "replan_timeout")
         require(self.horizon >= 2, "horizon", self.horizon, ">= 2")
         require(self.selection in SELECTION_RULES, "selection", self.selection,
                 f"one of {list(SELECTION_RULES)}")
@@ -245,6 +248,12 @@ class GlobalPlanner(Node):
             return
         nxt = self.waypoints[1]
         if np.linalg.norm(self.pose - nxt) >= self.params.waypoint_tolerance:
+            timeout = self.params.replan_timeout
+            waited = (self.get_clock().now() - self._last_plan_time).nanoseconds * 1e-9
+            if timeout > 0 and waited > timeout:  # beyond the paper: a stuck robot replans
+                self.get_logger().warning(f"no waypoint reached for {waited:.1f} s: replanning "
+                                          "from the current pose")
+                self._plan_to_goal(reset=False)
             return
         if len(self.waypoints) <= 2:  # the next waypoint is the goal
             self.get_logger().info(f"goal ({self.goal[0]:.2f}, {self.goal[1]:.2f}) reached")
@@ -270,6 +279,7 @@ class GlobalPlanner(Node):
         waypoints[0], waypoints[-1] = start, self.goal  # exact ends (the model works in float32)
         self.waypoints = waypoints
         stamp = self.get_clock().now()
+        self._last_plan_time = stamp
         self._plan_pub.publish(xy_to_path(waypoints, self.params.global_frame, stamp.to_msg()))
         self._cand_pub.publish(candidate_markers(result, self.params.global_frame,
                                                  stamp.to_msg()))

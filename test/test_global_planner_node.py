@@ -20,7 +20,8 @@ from visualization_msgs.msg import MarkerArray  # noqa: E402
 from ecahd_core.errors import EcahdError  # noqa: E402
 from ecahd_core.maps import builtin_map  # noqa: E402
 from ecahd_ros.conversions import grid_to_msg, path_to_xy  # noqa: E402
-from ecahd_ros.global_planner import PLAN_QOS, GlobalPlanner, GlobalPlannerParams  # noqa: E402
+from ecahd_ros.global_planner import (PARAMETERS, PLAN_QOS, GlobalPlanner,  # noqa: E402
+                                      GlobalPlannerParams)
 from ecahd_ros.map_publisher import MAP_QOS  # noqa: E402
 
 DOMAIN_ID = 60 + os.getpid() % 30  # 60..89: no other test module uses these
@@ -200,10 +201,36 @@ def test_same_seed_reproduces_the_plan(rig):
 @pytest.mark.parametrize("name,value", [("horizon", 1), ("num_candidates", 0),
                                         ("selection", "random"), ("epsilon", -1.0)])
 def test_bad_parameters_are_named(name, value):
-    values = dict(sd_model="", map_name="maze2d-large", num_candidates=10, horizon=10,
-                  ddim_steps=0, epsilon=1.0, selection="shortest_reaching", robot="circle",
-                  footprint="", footprint_padding=0.0, global_frame="map",
-                  waypoint_tolerance=0.3, seed=0, torch_threads=1)
+    values = {spec.name: spec.default for spec in PARAMETERS}  # the declared defaults
     values[name] = value
     with pytest.raises(EcahdError, match=name):
         GlobalPlannerParams(**values)
+
+
+def test_no_progress_replans_from_the_current_pose(rig):
+    r = rig(replan_timeout=0.3)
+    ready(r)
+    r.send_goal(GOAL)
+    r.spin_until(lambda: r.plans)
+    first = len(r.plans)
+    stuck = (1.6, 1.5)  # moved a little, nowhere near the next waypoint
+    deadline = time.monotonic() + 10.0
+    while len(r.plans) == first:
+        assert time.monotonic() < deadline, "no replanning after replan_timeout"
+        r.send_odom(stuck)
+        r.spin_for(0.1)
+    xy = path_to_xy(r.plans[-1])
+    assert np.allclose(xy[0], stuck) and tuple(xy[-1]) == GOAL
+    assert len(xy) == 10  # no waypoint was reached: the horizon stays
+
+
+def test_replan_timeout_zero_never_replans(rig):
+    r = rig(replan_timeout=0.0)
+    ready(r)
+    r.send_goal(GOAL)
+    r.spin_until(lambda: r.plans)
+    first = len(r.plans)
+    for _ in range(5):
+        r.send_odom((1.6, 1.5))
+        r.spin_for(0.1)
+    assert len(r.plans) == first
