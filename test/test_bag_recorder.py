@@ -24,17 +24,8 @@ from ecahd_ros.bag_recorder import BagError, BagRecorder, read_bag  # noqa: E402
 from ecahd_ros.conversions import grid_to_msg  # noqa: E402
 from ecahd_ros.map_publisher import MAP_QOS  # noqa: E402
 
-# a domain of its own per test process, so parallel test runs do not hear each other
-DOMAIN_ID = 170 + os.getpid() % 50
 N = 20  # messages per streamed topic
 
-
-@pytest.fixture
-def ros_context():
-    context = rclpy.context.Context()
-    rclpy.init(context=context, domain_id=DOMAIN_ID)
-    yield context
-    rclpy.try_shutdown(context=context)
 
 
 def spin_until(executor, condition, timeout: float = 10.0) -> None:
@@ -134,9 +125,9 @@ def test_existing_output_is_refused_and_nothing_is_overwritten(ros_context, tmp_
         read_bag(tmp_path)
 
 
-def test_sigint_closes_the_bag(ros_context, tmp_path):
+def test_sigint_closes_the_bag(ros_context, ros_domain_id, tmp_path):
     bag = tmp_path / "bag"
-    env = dict(os.environ, ROS_DOMAIN_ID=str(DOMAIN_ID))
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain_id))
     proc = subprocess.Popen(
         [sys.executable, "-m", "ecahd_ros.bag_recorder", "--ros-args",
          "-p", f"output:={bag}", "-p", "topics:=[collision]", "-p", "discovery_period:=0.05"],

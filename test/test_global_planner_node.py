@@ -24,17 +24,9 @@ from ecahd_ros.global_planner import (PARAMETERS, PLAN_QOS, GlobalPlanner,  # no
                                       GlobalPlannerParams)
 from ecahd_ros.map_publisher import MAP_QOS  # noqa: E402
 
-DOMAIN_ID = 60 + os.getpid() % 30  # 60..89: no other test module uses these
 ROBOT = (1.5, 1.5)  # free corridor cell of maze2d-large
 GOAL = (6.5, 5.5)  # free, a few corridors away
 
-
-@pytest.fixture
-def ros_context():
-    context = rclpy.context.Context()
-    rclpy.init(context=context, domain_id=DOMAIN_ID)
-    yield context
-    rclpy.try_shutdown(context=context)
 
 
 class Rig:

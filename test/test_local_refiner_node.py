@@ -24,7 +24,6 @@ from ecahd_ros.local_refiner import (LocalRefiner, LocalRefinerParams, lookahead
                                      pure_pursuit)
 from ecahd_ros.map_publisher import MAP_QOS  # noqa: E402
 
-DOMAIN_ID = 90 + os.getpid() % 30  # 90..119: no other test module uses these
 RATE = 20.0  # [Hz] control_rate in these tests
 # maze2d-large: y in [1, 2] is free for x in [1, 3]; x in [2, 3] is free for y in [1, 4]
 PLAN = [(1.5, 1.5), (2.5, 1.5), (2.5, 2.5), (2.5, 3.5)]
@@ -40,13 +39,6 @@ def params(**over) -> LocalRefinerParams:
     values.update(over)
     return LocalRefinerParams(**values)
 
-
-@pytest.fixture
-def ros_context():
-    context = rclpy.context.Context()
-    rclpy.init(context=context, domain_id=DOMAIN_ID)
-    yield context
-    rclpy.try_shutdown(context=context)
 
 
 class Rig:

@@ -15,13 +15,6 @@ from ecahd_ros.conversions import (grid_to_msg, msg_to_grid, path_to_xy, xy_to_p
 from ecahd_ros.map_publisher import MAP_QOS, MapPublisher  # noqa: E402
 
 
-@pytest.fixture
-def ros_context():
-    context = rclpy.context.Context()
-    rclpy.init(context=context)
-    yield context
-    rclpy.try_shutdown(context=context)
-
 
 def test_grid_msg_round_trip():
     grid = builtin_map("maze2d-umaze", resolution=0.25)

@@ -21,18 +21,9 @@ from ecahd_ros.conversions import msg_to_grid, pose_from_xy_yaw, yaw_from_quater
 from ecahd_ros.map_publisher import MAP_QOS  # noqa: E402
 from sim_bridge.node import SimBridge  # noqa: E402
 
-# a domain of its own per test process, so parallel test runs do not hear each other
-DOMAIN_ID = 120 + os.getpid() % 50
 START = (1.5, 1.5, 0.0)  # umaze corridor y in [1, 2], free for x in [1, 4]
 DT = 0.02  # 1 / rate_hz (50)
 
-
-@pytest.fixture
-def ros_context():
-    context = rclpy.context.Context()
-    rclpy.init(context=context, domain_id=DOMAIN_ID)
-    yield context
-    rclpy.try_shutdown(context=context)
 
 
 @pytest.fixture
