@@ -3,3 +3,13 @@
 Each module defines ``add_arguments(parser)`` and ``run(args) -> int``; the dispatcher in
 ``ecahd_ros.cli`` imports a module only when its subcommand is used.
 """
+
+DEFAULT_MAP = "maze2d-large"
+
+
+def add_map_arguments(p) -> None:
+    """``--map`` and ``--resolution``, the same for every command that loads a map."""
+    p.add_argument("--map", default=DEFAULT_MAP,
+                   help="built-in maze (maze2d-umaze|maze2d-medium|maze2d-large) or Nav2 map YAML")
+    p.add_argument("--resolution", type=float, default=0.1,
+                   help="[m/cell] grid resolution for built-in mazes")

@@ -8,12 +8,11 @@ from __future__ import annotations
 import argparse
 import time
 
+from ecahd_core.commands import add_map_arguments
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--map", default="maze2d-large",
-                   help="built-in maze (maze2d-umaze|maze2d-medium|maze2d-large) or Nav2 map YAML")
-    p.add_argument("--resolution", type=float, default=0.1,
-                   help="[m/cell] grid resolution for built-in mazes")
+    add_map_arguments(p)
     p.add_argument("--robot", default="circle",
                    help="footprint: circle | quadruped | humanoid | Nav2 polygon '[[x, y], ...]'; "
                         "the A* clearance is its circumscribed radius plus --padding")

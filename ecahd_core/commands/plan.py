@@ -18,6 +18,8 @@ import logging
 import time
 from pathlib import Path
 
+from ecahd_core.commands import add_map_arguments
+
 log = logging.getLogger("ecahd.plan")
 
 METHODS = ("ecahd", "hd", "sd", "fd", "astar")
@@ -27,10 +29,7 @@ SWEEP_SPACING = 0.25  # [m] between footprint outlines drawn along the path
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--map", default="maze2d-large",
-                   help="built-in maze (maze2d-umaze|maze2d-medium|maze2d-large) or Nav2 map YAML")
-    p.add_argument("--resolution", type=float, default=0.1,
-                   help="[m/cell] grid resolution for built-in mazes")
+    add_map_arguments(p)
     p.add_argument("--robot", default="circle",
                    help="footprint: circle | quadruped | humanoid | Nav2 polygon '[[x, y], ...]'")
     p.add_argument("--padding", type=float, default=0.0,
