@@ -8,12 +8,8 @@ guided by J (``HierarchicalPlanner.refine``). This happens once per segment: whe
 and when the robot comes within ``waypoint_tolerance`` of the waypoint it is heading for; the
 control timer only tracks the current dense local plan.
 
-Controller (every 1 / control_rate s): the lookahead point is the first point of the path (the
-dense local plan, then the remaining waypoints) at least ``lookahead`` m from the robot, beyond
-the path point nearest to it. With alpha the heading error to it and L its distance, the command
-is the pure-pursuit arc v = max_v, w = v * 2 sin(alpha) / L, slowed so |w| <= max_w and so the
-robot can stop at the goal (v <= sqrt(2 max_accel d_goal)); when |alpha| > pi/4 the robot first
-turns on the spot (v = 0, w = clip(2 alpha)). |dv| <= max_accel / control_rate per tick. A zero
+Controller (every 1 / control_rate s): ``ecahd_core.controller``'s pure pursuit along the
+dense local plan, then the remaining waypoints, within max_v, max_w and max_accel. A zero
 command is published when there is no plan, when the odometry is older than ``stale_timeout``
 (or the plan older than ``plan_timeout`` when that is > 0), and once the goal (the plan's last
 point) is within ``goal_tolerance``; the plan is then dropped until a new one arrives.
@@ -50,6 +46,7 @@ from rclpy.qos import QoSProfile
 from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
+from ecahd_core.controller import lookahead_point, pure_pursuit, straight_local_plan
 from ecahd_core.errors import EcahdError, PlanningError
 from ecahd_core.planner import DenseConfig
 from ecahd_ros.conversions import (msg_to_grid, path_to_xy, timing_message, xy_to_path,
@@ -62,9 +59,6 @@ from ecahd_ros.spin import spin_node
 
 STREAM_QOS = QoSProfile(depth=10)
 VIZ_QOS = QoSProfile(depth=1)
-ROTATE_THRESHOLD = math.pi / 4  # [rad] heading error above which the robot turns on the spot
-ROTATE_GAIN = 2.0  # [1/s] w = gain * alpha when turning on the spot
-RESAMPLE_STEP = 0.05  # [m] spacing of the path points the lookahead search walks
 
 PARAMETERS = [
     ParamSpec("dd_model", "", "DD checkpoint path; '' = the shipped model for map_name"),
@@ -122,52 +116,6 @@ class LocalRefinerParams:
                          "torch_threads")
         require_non_negative(self, "c_th", "footprint_padding", "plan_timeout", "seed")
         require(bool(self.global_frame), "global_frame", self.global_frame, "non-empty")
-
-
-# ------------------------------------------------------------------------------ controller
-def straight_local_plan(a: np.ndarray, b: np.ndarray, points: int) -> np.ndarray:
-    """LocalPlan(a, b): (points, 2) [m] evenly spaced from a to b, both included."""
-    frac = np.linspace(0.0, 1.0, points)[:, None]
-    return a[None] + frac * (b - a)[None]
-
-
-def resample(path: np.ndarray, step: float = RESAMPLE_STEP) -> np.ndarray:
-    """(N, 2) polyline -> (M, 2) points at most ``step`` m apart, the vertices included."""
-    out = [path[:1]]
-    for a, b in zip(path[:-1], path[1:]):
-        n = max(1, int(math.ceil(np.linalg.norm(b - a) / step)))
-        out.append(a + np.linspace(0.0, 1.0, n + 1)[1:, None] * (b - a))
-    return np.concatenate(out)
-
-
-def lookahead_point(path: np.ndarray, xy: np.ndarray, lookahead: float) -> np.ndarray:
-    """The first point of ``path`` (N, 2) beyond the one nearest ``xy`` that is at least
-    ``lookahead`` m from ``xy``; the path's end if none is."""
-    pts = resample(path)
-    d = np.linalg.norm(pts - xy[None], axis=1)
-    ahead = np.flatnonzero(d[int(np.argmin(d)):] >= lookahead)
-    return pts[int(np.argmin(d)) + ahead[0]] if len(ahead) else pts[-1]
-
-
-def pure_pursuit(pose: tuple[float, float, float], target: np.ndarray, goal_distance: float,
-                 v_prev: float, dt: float, p: LocalRefinerParams) -> tuple[float, float]:
-    """(v [m/s], w [rad/s]) towards ``target`` from ``pose`` (x, y, yaw) within the limits."""
-    x, y, yaw = pose
-    dx, dy = float(target[0] - x), float(target[1] - y)
-    L = math.hypot(dx, dy)
-    if L < 1e-6:
-        return 0.0, 0.0
-    alpha = math.atan2(math.sin(math.atan2(dy, dx) - yaw), math.cos(math.atan2(dy, dx) - yaw))
-    if abs(alpha) > ROTATE_THRESHOLD:  # turn on the spot first
-        return (max(0.0, v_prev - p.max_accel * dt),  # slowing down within max_accel
-                float(np.clip(ROTATE_GAIN * alpha, -p.max_w, p.max_w)))
-    kappa = 2.0 * math.sin(alpha) / L  # [1/m] the arc through the lookahead point
-    v_target = min(p.max_v, math.sqrt(2.0 * p.max_accel * max(goal_distance, 0.0)))
-    if abs(kappa) > 1e-9:
-        v_target = min(v_target, p.max_w / abs(kappa))
-    v = float(np.clip(v_target, v_prev - p.max_accel * dt, v_prev + p.max_accel * dt))
-    v = max(0.0, v)
-    return v, float(np.clip(v * kappa, -p.max_w, p.max_w))
 
 
 def footprint_markers(footprint, local: np.ndarray, frame_id: str, stamp,
