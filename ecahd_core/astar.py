@@ -395,6 +395,25 @@ def astar_path(grid: GridMap, start_xy, goal_xy, clearance: float, *, smooth: bo
     return AStarPlanner(grid, clearance, smooth=smooth).plan(start_xy, goal_xy)
 
 
+def plan_from_pose(planner: AStarPlanner, pose_xy, goal_xy) -> np.ndarray:
+    """A* from a robot's pose, which (unlike a benchmark start) may lie in a cell without the
+    clearance, e.g. after the robot brushed a wall: the search then starts from the nearest
+    traversable cell centre of the goal's region and the path is prefixed with the pose.
+
+    Returns (N, 2) [m], exactly ``pose_xy`` first and ``goal_xy`` last. Raises PlanningError for
+    a goal without clearance or unreachable, and a pose off the map or in an obstacle.
+    """
+    pose = planner.grid.validate_point(pose_xy, "robot pose")
+    goal, goal_cell = planner.check_endpoint(goal_xy, "goal")
+    row, col = (int(v) for v in planner.grid.world_to_cell(pose))
+    if planner.mask[row, col]:
+        return planner.plan(pose, goal)
+    rows, cols = np.nonzero(planner.components == planner.components[goal_cell])
+    centres = planner.grid.cell_to_world(rows, cols)  # (K, 2) traversable, the goal's region
+    entry = centres[int(np.argmin(np.linalg.norm(centres - pose, axis=1)))]
+    return np.concatenate([pose[None], planner.plan(entry, goal)])
+
+
 def path_length(path) -> float:
     """Sum of segment lengths [m] of a (N, 2) path; 0.0 for fewer than two points."""
     pts = np.asarray(path, dtype=np.float64)

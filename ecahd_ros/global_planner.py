@@ -1,24 +1,39 @@
 """global_planner: ECAHD's Sparse Diffusion global planner as a node (paper Sec. III-A,
-Algorithm 1 lines 2-11 with its shrinking horizon).
+Algorithm 1 lines 2-11 with its shrinking horizon), and the Table III baselines' global planners.
 
-A goal becomes a plan here: on ``goal_pose`` the node samples N candidate global plans of P^g
-waypoints from the robot's pose (``odom``) to the goal in one batch, keeps the best of N and
-publishes its waypoints on ``plan``. When the robot comes within ``waypoint_tolerance`` of the
-next waypoint p, it replans from its current pose with horizon P^g - p (Algorithm 1: the global
-plan t^g_p shrinks by one waypoint per iteration), down to the straight [pose, goal] at horizon 2.
+A goal becomes a plan here. With ``method`` "sd" (ECAHD): on ``goal_pose`` the node samples N
+candidate global plans of P^g waypoints from the robot's pose (``odom``) to the goal in one
+batch, keeps the best of N and publishes its waypoints on ``plan``. When the robot comes within
+``waypoint_tolerance`` of the next waypoint p, it replans from its current pose with horizon
+P^g - p (Algorithm 1: the global plan t^g_p shrinks by one waypoint per iteration), down to the
+straight [pose, goal] at horizon 2.
+
+The baselines plan once per goal (and again on a map update), with no per-waypoint replanning
+and no ``replan_timeout``; their whole path goes out on ``plan`` for the local refiner to follow:
+    "astar": A* with the footprint's clearance (circumscribed radius, ``footprint_padding``
+        included; ``ecahd_core.astar``, as ``ecahd plan --method astar``), string-pulled, then
+        resampled so consecutive points are at most ASTAR_SPACING (0.25 m) apart, its vertices
+        kept. A pose in a cell without the clearance starts from the nearest one that has it.
+    "fd": the Diffuser-style Full Diffusion model (100 points, ``fd_model``), guided by J when
+        ``fd_guidance``; seeded by ``seed`` like SD.
 
 Parameters (read-only, declared in :data:`PARAMETERS`):
+    method (str, "sd"): the global planner, one of METHODS ("sd", "astar", "fd").
     sd_model (str, ""): SD checkpoint path; "" = the shipped model for ``map_name``.
+    fd_model (str, ""), fd_guidance (bool, false): the FD checkpoint ("" = shipped) and whether
+        J guides it (method "fd").
     map_name (str, "maze2d-large"): the map's identity (an OccupancyGrid has no name); the
         checkpoint must have been trained for this name and the received grid's fingerprint.
     num_candidates (int, 10): N, candidates sampled in one batch.
     horizon (int, 10): P^g, waypoints of the first global plan.
-    ddim_steps (int, 0): DDIM steps; 0 = the checkpoint's.
+    ddim_steps (int, 0): DDIM steps of SD or FD; 0 = the checkpoint's.
     epsilon (double, 1.0): [m] goal-reaching radius of the selection rule.
     selection (str, "shortest_reaching"): shortest_reaching (paper) or collision_aware.
     robot (str, "circle"), footprint (str, ""), footprint_padding (double, 0.0 m): the robot.
     global_frame (str, "map"): frame of goals and plans.
-    waypoint_tolerance (double, 0.3): [m] distance to the next waypoint that triggers a replan.
+    waypoint_tolerance (double, 0.3): [m] distance to the next waypoint that triggers a replan
+        (sd); distance to the goal that ends it (all methods).
+    replan_timeout (double, 5.0): [s] no waypoint reached for this long replans (sd); 0 = never.
     seed (int, 0): seed of the sampler's torch.Generator (a seed reproduces a plan sequence).
     torch_threads (int, 1): torch.set_num_threads.
 
@@ -30,15 +45,16 @@ Subscribes:
         goal pre-empts the current one; a goal before map and odometry is queued.
     odom (nav_msgs/Odometry; reliable, depth 10): the robot's pose in ``global_frame``.
 Publishes:
-    plan (nav_msgs/Path; reliable, transient_local, depth 1): the selected sparse waypoints,
-        first = robot pose, last = the goal exactly.
-    plan_candidates (visualization_msgs/MarkerArray; reliable, depth 1): the N candidates as
-        line strips (grey), the chosen one highlighted (purple, wider).
-    ecahd/timing (std_msgs/String; reliable, depth 10): JSON
-        ``{"stage": "sd", "ms": <float>, "horizon": <int>, "stamp": <float s>}``.
+    plan (nav_msgs/Path; reliable, transient_local, depth 1): the selected sparse waypoints
+        (sd) or the whole path (astar, fd), first = robot pose, last = the goal exactly.
+    plan_candidates (visualization_msgs/MarkerArray; reliable, depth 1): sd only: the N
+        candidates as line strips (grey), the chosen one highlighted (purple, wider).
+    ecahd/timing (std_msgs/String; reliable, depth 10): JSON ``{"stage": "sd" | "astar" | "fd",
+        "ms": <float>, "horizon": <int, points of the plan>, "stamp": <float s>}``, one per plan.
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -63,13 +79,20 @@ PLAN_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 MARKER_QOS = QoSProfile(depth=1)
 
+METHODS = ("sd", "astar", "fd")  # ECAHD's Sparse Diffusion; the Table III baselines' planners
+ASTAR_SPACING = 0.25  # [m] most distance between consecutive points of a published A* path
+
 PARAMETERS = [
+    ParamSpec("method", "sd", f"global planner: {list(METHODS)} (sd: ECAHD, replanned at each "
+                              "waypoint; astar, fd: one whole path per goal)"),
     ParamSpec("sd_model", "", "SD checkpoint path; '' = the shipped model for map_name"),
+    ParamSpec("fd_model", "", "FD checkpoint path (method fd); '' = the shipped model"),
+    ParamSpec("fd_guidance", False, "method fd: guide the Full Diffusion sample by J"),
     ParamSpec("map_name", "maze2d-large", "name of the map on 'map' (checked against the "
                                           "checkpoint with the grid's fingerprint)"),
     ParamSpec("num_candidates", 10, "N, candidate global plans sampled in one batch"),
     ParamSpec("horizon", 10, "P^g, waypoints of the first global plan"),
-    ParamSpec("ddim_steps", 0, "DDIM steps; 0 = the checkpoint's"),
+    ParamSpec("ddim_steps", 0, "DDIM steps of SD or FD; 0 = the checkpoint's"),
     ParamSpec("epsilon", 1.0, "[m] goal-reaching radius of the best-of-N rule"),
     ParamSpec("selection", "shortest_reaching", f"best-of-N rule: {list(SELECTION_RULES)}"),
     ParamSpec("robot", "circle", "footprint preset: circle, quadruped, humanoid"),
@@ -77,9 +100,10 @@ PARAMETERS = [
     ParamSpec("footprint_padding", 0.0, "[m] grows the footprint (Nav2 footprint_padding)"),
     ParamSpec("global_frame", "map", "frame of goals, odometry poses and plans"),
     ParamSpec("waypoint_tolerance", 0.3, "[m] reaching the next waypoint this close replans "
-                                         "with horizon P^g - p"),
-    ParamSpec("replan_timeout", 5.0, "[s] with no waypoint reached for this long, replan from "
-                                     "the current pose (same horizon); 0 = never"),
+                                         "with horizon P^g - p (sd); the goal this close is "
+                                         "reached"),
+    ParamSpec("replan_timeout", 5.0, "[s] sd: with no waypoint reached for this long, replan "
+                                     "from the current pose (same horizon); 0 = never"),
     ParamSpec("seed", 0, "seed of the sampler's torch.Generator"),
     ParamSpec("torch_threads", 1, "torch.set_num_threads for this process"),
 ]
@@ -89,7 +113,10 @@ PARAMETERS = [
 class GlobalPlannerParams:
     """The node's validated parameters (see the module docstring for units)."""
 
+    method: str
     sd_model: str
+    fd_model: str
+    fd_guidance: bool
     map_name: str
     num_candidates: int
     horizon: int
@@ -109,6 +136,7 @@ class GlobalPlannerParams:
         require_positive(self, "num_candidates", "epsilon", "waypoint_tolerance",
                          "torch_threads")
         require_non_negative(self, "ddim_steps", "footprint_padding", "seed", "replan_timeout")
+        require(self.method in METHODS, "method", self.method, f"one of {list(METHODS)}")
         require(self.horizon >= 2, "horizon", self.horizon, ">= 2")
         require(self.selection in SELECTION_RULES, "selection", self.selection,
                 f"one of {list(SELECTION_RULES)}")
@@ -149,7 +177,9 @@ class GlobalPlanner(Node):
         declare_parameters(self, PARAMETERS)
         self.params: GlobalPlannerParams | None = None
         self.grid = None
-        self.sparse: SparseDiffusion | None = None
+        self.sparse: SparseDiffusion | None = None  # method sd
+        self.astar = None  # method astar: ecahd_core.astar.AStarPlanner
+        self.fd = None  # method fd: ecahd_core.planner.FullDiffusion
         self.pose: np.ndarray | None = None  # (2,) [m] latest odometry position
         self.goal: np.ndarray | None = None  # (2,) [m] active (or queued) goal
         self.waypoints: np.ndarray | None = None  # (P, 2) [m] current plan
@@ -173,8 +203,14 @@ class GlobalPlanner(Node):
         self.create_subscription(PoseStamped, "goal_pose", self._guard(self._on_goal),
                                  STREAM_QOS)
         self.create_subscription(Odometry, "odom", self._guard(self._on_odom), STREAM_QOS)
-        self.get_logger().info(f"global planner ready: N={p.num_candidates}, P^g={p.horizon}, "
-                               f"robot {self.footprint.name!r}, waiting for map and odom")
+        what = f"SD, N={p.num_candidates}, P^g={p.horizon}" if p.method == "sd" else p.method
+        self.get_logger().info(f"global planner ready: {what}, robot {self.footprint.name!r}, "
+                               "waiting for map and odom")
+
+    @property
+    def ready(self) -> bool:
+        """A map arrived and the planner of ``method`` is built on it."""
+        return any(x is not None for x in (self.sparse, self.astar, self.fd))
 
     # ------------------------------------------------------------------------- callbacks
     def _guard(self, callback):
@@ -193,24 +229,51 @@ class GlobalPlanner(Node):
         return wrapped
 
     def _on_map(self, msg: OccupancyGrid) -> None:
+        p = self.params
+        # a map we cannot plan on leaves no stale planner behind
+        self.sparse = self.astar = self.fd = None
+        grid = msg_to_grid(msg, name=p.map_name)
+        if p.method == "sd":
+            self.sparse = self._build_sd(grid)
+        elif p.method == "astar":
+            from ecahd_core.astar import AStarPlanner, clearance_for_footprint
+
+            self.astar = AStarPlanner(grid, clearance_for_footprint(self.footprint))
+        else:
+            self.fd = self._build_fd(grid)
+        self.grid = grid
+        self.get_logger().info(f"map {grid.name!r} received ({grid.width} x {grid.height} "
+                               f"cells); {p.method} planner built")
+        if self.goal is not None and self.pose is not None:
+            self._plan_to_goal(reset=True)
+
+    def _build_sd(self, grid) -> SparseDiffusion:
         from ecahd_core.cost import CostConfig
         from ecahd_core.model_zoo import load_model
 
         p = self.params
-        self.sparse = None  # a map we cannot plan on leaves no stale planner behind
-        grid = msg_to_grid(msg, name=p.map_name)
         ckpt = load_model("sd", grid, path=p.sd_model or None, footprint=self.footprint,
                           horizon=p.horizon)
         cost = None
         if p.selection == "collision_aware":
             cost_config = CostConfig()
             cost = (cost_config.make_costmap(grid), self.footprint.points, cost_config)
-        self.sparse = SparseDiffusion(ckpt, p.sparse_config(), cost=cost)
-        self.grid = grid
-        self.get_logger().info(f"map {grid.name!r} received ({grid.width} x {grid.height} "
-                               f"cells); SD planner built")
-        if self.goal is not None and self.pose is not None:
-            self._plan_to_goal(reset=True)
+        return SparseDiffusion(ckpt, p.sparse_config(), cost=cost)
+
+    def _build_fd(self, grid):
+        from ecahd_core.cost import CostConfig
+        from ecahd_core.model_zoo import load_model
+        from ecahd_core.planner import FullDiffusion
+
+        p = self.params
+        ckpt = load_model("fd", grid, path=p.fd_model or None, footprint=self.footprint)
+        cost = None
+        if p.fd_guidance:
+            cost_config = CostConfig()
+            cost = (cost_config.make_costmap(grid),
+                    torch.as_tensor(self.footprint.points, dtype=torch.float32), cost_config)
+        return FullDiffusion(ckpt, guidance=p.fd_guidance, cost=cost,
+                             num_steps=p.ddim_steps or None)
 
     def _on_goal(self, msg: PoseStamped) -> None:
         p = self.params
@@ -227,9 +290,9 @@ class GlobalPlanner(Node):
             except PlanningError as exc:
                 raise PlanningError(f"goal rejected: {exc}") from None
         self.goal = xy
-        if self.sparse is None or self.pose is None:
-            missing = " and ".join(n for n, v in (("map", self.sparse), ("odom", self.pose))
-                                   if v is None)
+        if not self.ready or self.pose is None:
+            missing = " and ".join(n for n, ok in (("map", self.ready),
+                                                   ("odom", self.pose is not None)) if not ok)
             self.get_logger().info(f"goal ({xy[0]:.2f}, {xy[1]:.2f}) queued until {missing} "
                                    f"arrive(s)")
             return
@@ -241,10 +304,15 @@ class GlobalPlanner(Node):
                                 f"{self.params.global_frame!r}: ignored")
         first = self.pose is None
         self.pose = np.array([msg.pose.pose.position.x, msg.pose.pose.position.y])
-        if self.goal is None or self.sparse is None:
+        if self.goal is None or not self.ready:
             return
         if first or self.waypoints is None:
             self._plan_to_goal(reset=True)  # the queued goal
+            return
+        if self.params.method != "sd":  # one whole path per goal: only notice the goal reached
+            if np.linalg.norm(self.pose - self.goal) < self.params.waypoint_tolerance:
+                self.get_logger().info(f"goal ({self.goal[0]:.2f}, {self.goal[1]:.2f}) reached")
+                self.goal = None
             return
         nxt = self.waypoints[1]
         if np.linalg.norm(self.pose - nxt) >= self.params.waypoint_tolerance:
@@ -264,30 +332,57 @@ class GlobalPlanner(Node):
 
     # ----------------------------------------------------------------------------- planning
     def _plan_to_goal(self, *, reset: bool) -> None:
-        """SD best-of-N from the current pose to the goal with horizon P^g - p; publish."""
+        """Plan from the current pose to the goal and publish: SD best-of-N with horizon
+        P^g - p, or the baseline's whole path."""
         if reset:
             self.iteration = 0
-        horizon = max(2, self.params.horizon - self.iteration)
         try:  # a goal queued before the map is checked here
             self.goal = self.grid.validate_point(self.goal, "goal")
         except PlanningError as exc:
             self.goal = None
             raise PlanningError(f"goal rejected: {exc}") from None
         start = self.grid.validate_point(self.pose, "robot pose")
-        result = self.sparse.plan(start, self.goal, horizon=horizon, generator=self.generator)
-        waypoints = result.waypoints.copy()
-        waypoints[0], waypoints[-1] = start, self.goal  # exact ends (the model works in float32)
+        method, result, detail = self.params.method, None, ""
+        if method == "sd":
+            horizon = max(2, self.params.horizon - self.iteration)
+            result = self.sparse.plan(start, self.goal, horizon=horizon,
+                                      generator=self.generator)
+            waypoints, ms = result.waypoints.copy(), result.time_ms
+            detail = f" (candidate {result.best} of {len(result.candidates)})"
+        elif method == "astar":
+            waypoints, ms = self._plan_astar(start)
+        else:
+            t0 = time.perf_counter()
+            waypoints = self.fd.plan(start, self.goal, generator=self.generator)
+            ms = (time.perf_counter() - t0) * 1e3
+        waypoints[0], waypoints[-1] = start, self.goal  # exact ends (the models work in float32)
         self.waypoints = waypoints
         stamp = self.get_clock().now()
         self._last_plan_time = stamp
         self._plan_pub.publish(xy_to_path(waypoints, self.params.global_frame, stamp.to_msg()))
-        self._cand_pub.publish(candidate_markers(result, self.params.global_frame,
-                                                 stamp.to_msg()))
-        self._timing_pub.publish(timing_message("sd", result.time_ms, stamp.nanoseconds * 1e-9,
-                                                horizon=horizon))
-        self.get_logger().info(f"plan of {horizon} waypoints to ({self.goal[0]:.2f}, "
-                               f"{self.goal[1]:.2f}) in {result.time_ms:.1f} ms "
-                               f"(candidate {result.best} of {len(result.candidates)})")
+        if result is not None:
+            self._cand_pub.publish(candidate_markers(result, self.params.global_frame,
+                                                     stamp.to_msg()))
+        self._timing_pub.publish(timing_message(method, ms, stamp.nanoseconds * 1e-9,
+                                                horizon=len(waypoints)))
+        self.get_logger().info(f"{method} plan of {len(waypoints)} points to "
+                               f"({self.goal[0]:.2f}, {self.goal[1]:.2f}) in {ms:.1f} ms"
+                               f"{detail}")
+
+    def _plan_astar(self, start: np.ndarray) -> tuple[np.ndarray, float]:
+        """A* from ``start`` to the goal -> (path (N, 2) [m], ASTAR_SPACING apart at most;
+        wall time [ms]). An unreachable goal or one without clearance is rejected."""
+        from ecahd_core.astar import plan_from_pose
+        from ecahd_core.controller import resample
+
+        t0 = time.perf_counter()
+        try:
+            path = plan_from_pose(self.astar, start, self.goal)
+        except PlanningError as exc:  # the pose was validated: the goal is the problem
+            self.goal = None
+            raise PlanningError(f"goal rejected: {exc}") from None
+        path = resample(path, ASTAR_SPACING)
+        return path, (time.perf_counter() - t0) * 1e3
 
 
 def main(args=None) -> None:

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from ecahd_core.astar import (MOTIONS, AStarConfig, AStarPlanner, astar_path,
-                              clearance_for_footprint, path_length, sample_free_point,
-                              sample_free_points)
+                              clearance_for_footprint, path_length, plan_from_pose,
+                              sample_free_point, sample_free_points)
 from ecahd_core.errors import PlanningError
 from ecahd_core.footprint import make_footprint
 from ecahd_core.maps import FREE, OCCUPIED, GridMap, builtin_map
@@ -274,3 +274,26 @@ def test_sample_free_points_lie_in_the_mask():
     assert sample_free_point(rng, planner.mask, grid).shape == (2,)
     with pytest.raises(PlanningError, match="no cell"):
         sample_free_points(rng, np.zeros_like(planner.mask), grid, 1)
+
+
+def test_plan_from_a_pose_without_clearance_enters_the_nearest_traversable_cell():
+    # 1 m cells, free x in [1, 6], y in [1, 4]. Clearance 0.9 m: a centre needs 0.9 m to every
+    # wall edge, which only the middle row's inner centres have (y = 2.5: 1.5 m to y = 1 and
+    # y = 4; x = 2.5..4.5: >= 1.5 m to x = 1 and x = 6); the bottom row's lie 0.5 m from y = 1
+    grid = grid_from_rows(["#######",
+                           "#.....#",
+                           "#.....#",
+                           "#.....#",
+                           "#######"])
+    planner = AStarPlanner(grid, 0.9)
+    assert np.array_equal(np.argwhere(planner.mask), [[2, 2], [2, 3], [2, 4]])
+    pose, goal = np.array([2.6, 1.4]), np.array([4.5, 2.5])  # pose in the bottom row
+    path = plan_from_pose(planner, pose, goal)
+    np.testing.assert_allclose(path[0], pose)
+    np.testing.assert_allclose(path[1], [2.5, 2.5])  # the nearest traversable centre
+    np.testing.assert_allclose(path[-1], goal)
+    # a pose with clearance: the plain A* plan
+    np.testing.assert_allclose(plan_from_pose(planner, [2.5, 2.5], goal),
+                               planner.plan([2.5, 2.5], goal))
+    with pytest.raises(PlanningError, match="goal"):  # the goal still needs the clearance
+        plan_from_pose(planner, [2.5, 2.5], [4.5, 1.5])

@@ -20,8 +20,8 @@ from visualization_msgs.msg import MarkerArray  # noqa: E402
 from ecahd_core.errors import EcahdError  # noqa: E402
 from ecahd_core.maps import builtin_map  # noqa: E402
 from ecahd_ros.conversions import grid_to_msg, path_to_xy  # noqa: E402
-from ecahd_ros.global_planner import (PARAMETERS, PLAN_QOS, GlobalPlanner,  # noqa: E402
-                                      GlobalPlannerParams)
+from ecahd_ros.global_planner import (ASTAR_SPACING, PARAMETERS, PLAN_QOS,  # noqa: E402
+                                      GlobalPlanner, GlobalPlannerParams)
 from ecahd_ros.map_publisher import MAP_QOS  # noqa: E402
 
 ROBOT = (1.5, 1.5)  # free corridor cell of maze2d-large
@@ -106,7 +106,7 @@ def ready(rig):
     """Map and odometry received, planner built."""
     rig.send_map()
     rig.send_odom(ROBOT)
-    rig.spin_until(lambda: rig.planner.sparse is not None and rig.planner.pose is not None)
+    rig.spin_until(lambda: rig.planner.ready and rig.planner.pose is not None)
 
 
 def test_goal_gives_a_plan_from_the_robot_to_the_goal(rig):
@@ -226,3 +226,66 @@ def test_replan_timeout_zero_never_replans(rig):
         r.send_odom((1.6, 1.5))
         r.spin_for(0.1)
     assert len(r.plans) == first
+
+
+@pytest.mark.parametrize("method,stage", [("astar", "astar"), ("fd", "fd")])
+def test_baseline_methods_publish_one_whole_path_per_goal(rig, method, stage):
+    r = rig(method=method)
+    ready(r)
+    r.send_goal(GOAL)
+    r.spin_until(lambda: r.plans and r.timings)
+    xy = path_to_xy(r.plans[-1])
+    assert np.allclose(xy[0], ROBOT) and tuple(xy[-1]) == GOAL  # pose to goal, exactly
+    if method == "astar":  # resampled: no step longer than ASTAR_SPACING
+        assert np.linalg.norm(np.diff(xy, axis=0), axis=1).max() <= ASTAR_SPACING + 1e-9
+        # A* keeps the footprint's clearance: the circle's 0.4 m from every wall
+        from ecahd_core.collision import check_collision
+        from ecahd_core.footprint import make_footprint
+
+        report = check_collision(xy, make_footprint("circle"), builtin_map("maze2d-large"))
+        assert report.collision_free
+    else:
+        assert len(xy) == 100  # the FD model's sequence, published whole
+    timing = json.loads(r.timings[-1].data)
+    assert timing["stage"] == stage and timing["ms"] > 0 and timing["horizon"] == len(xy)
+    # no per-waypoint replanning: reaching the path's next points publishes nothing new
+    count = len(r.plans)
+    for p in xy[1:len(xy) // 2:3]:
+        r.send_odom(p)
+        r.spin_for(0.05)
+    assert len(r.plans) == count and r.planner.goal is not None
+    r.send_odom(GOAL)  # the goal reached ends it
+    r.spin_until(lambda: r.planner.goal is None)
+    assert len(r.plans) == count
+
+
+def test_astar_from_a_pose_without_clearance_and_an_unreachable_goal(rig):
+    r = rig(method="astar")
+    r.send_map()
+    near_wall = (1.5, 1.15)  # free, 0.15 m from the wall below: no 0.4 m clearance
+    r.send_odom(near_wall)
+    r.spin_until(lambda: r.planner.ready and r.planner.pose is not None)
+    r.send_goal(GOAL)
+    r.spin_until(lambda: r.plans)
+    xy = path_to_xy(r.plans[-1])
+    assert np.allclose(xy[0], near_wall) and tuple(xy[-1]) == GOAL
+    r.send_goal((1.5, 1.15))  # free but without the circle's clearance: rejected
+    r.spin_for(0.3)
+    assert len(r.plans) == 1 and r.planner.goal is None
+
+
+def test_bad_method_is_named():
+    values = {spec.name: spec.default for spec in PARAMETERS}
+    values["method"] = "rrt"
+    with pytest.raises(EcahdError, match=r"parameter method must be one of \['sd', 'astar', "
+                                         r"'fd'\], got 'rrt'"):
+        GlobalPlannerParams(**values)
+
+
+def test_bad_method_node_logs_and_does_not_start(ros_context):
+    node = GlobalPlanner(context=ros_context, parameter_overrides=[
+        Parameter("method", value="rrt")])
+    try:
+        assert node.params is None and not node.ready
+    finally:
+        node.destroy_node()
