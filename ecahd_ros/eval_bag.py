@@ -6,6 +6,11 @@ and ``odom``; ``collision``, ``cmd_vel`` and ``ecahd/timing`` are used when pres
 (``ecahd_core.evaluation``). Episodes are cut on the bag's receive times (one clock for all
 topics); control steps and durations come from the odometry stamps (simulated time).
 
+Inference time counts the planning records of ``ecahd/timing`` (SD / FD / A*, J checks, DD);
+the local refiner's "control" records (the wall time of each control tick) are reported apart,
+as their median and 99th percentile (``control_ms_p50``, ``control_ms_p99``; per episode and
+pooled over the run in the means).
+
 Writes the per-episode records and their means as JSON (``--json``), the table next to the
 paper's as markdown (``--md``) and the driven paths over the map (``--png``, Fig. 4 style: each
 episode's path, its goal as a star, the poses where the exact checker finds a wall in red);
@@ -74,7 +79,8 @@ def evaluate_bag(path, *, robot: str = "circle", map_name: str = "recorded",
     """Read a bag and compute the metrics of each episode; raises BagError when the map, goals
     or odometry are missing."""
     from ecahd_core.errors import BagError
-    from ecahd_core.evaluation import evaluate_episode, split_episodes, summarize
+    from ecahd_core.evaluation import (control_times, evaluate_episode, split_episodes,
+                                       summarize)
     from ecahd_core.footprint import make_footprint
     from ecahd_ros.bag_recorder import read_bag
     from ecahd_ros.conversions import msg_to_grid, yaw_from_quaternion
@@ -106,8 +112,9 @@ def evaluate_bag(path, *, robot: str = "circle", map_name: str = "recorded",
                                 goal_radius=goal_radius, max_steps=max_steps,
                                 period=control_period)
                for i, ep in enumerate(episodes)]
+    control = np.concatenate([control_times(ep) for ep in episodes]) if episodes else None
     return BagEvaluation(grid=grid, footprint=footprint, episodes=episodes, metrics=metrics,
-                         summary=summarize(metrics))
+                         summary=summarize(metrics, control_ms=control))
 
 
 def draw_trajectories(result: BagEvaluation, path, *, title: str = "") -> Path:
@@ -150,14 +157,16 @@ def draw_trajectories(result: BagEvaluation, path, *, title: str = "") -> Path:
 
 
 def write_outputs(result: BagEvaluation, bag, *, json_path=None, md_path=None,
-                  png_path=None) -> str:
-    """Write the requested files; returns the markdown table."""
+                  png_path=None, extra: dict | None = None, notes: str = "") -> str:
+    """Write the requested files; returns the markdown table. ``extra``: more top-level keys
+    of the JSON; ``notes``: markdown appended to the table (in the return value too)."""
     from ecahd_core.evaluation import markdown_table
 
-    table = markdown_table(result.summary, result.metrics)
+    table = markdown_table(result.summary, result.metrics) + notes
     if json_path:
         Path(json_path).parent.mkdir(parents=True, exist_ok=True)
-        Path(json_path).write_text(json.dumps(result.to_dict(str(bag)), indent=2) + "\n")
+        Path(json_path).write_text(json.dumps({**result.to_dict(str(bag)), **(extra or {})},
+                                              indent=2) + "\n")
     if md_path:
         Path(md_path).parent.mkdir(parents=True, exist_ok=True)
         Path(md_path).write_text(f"# Closed-loop evaluation of `{bag}`\n\n"

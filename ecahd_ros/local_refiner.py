@@ -8,6 +8,11 @@ guided by J (``HierarchicalPlanner.refine``). This happens once per segment: whe
 and when the robot comes within ``waypoint_tolerance`` of the waypoint it is heading for; the
 control timer only tracks the current dense local plan.
 
+With ``dd_enabled`` false ("ECAHD w/o DD" of Table III, and the baselines' "no local planner")
+the straight local plans are followed as they are: J is still evaluated on each one (so the
+"j_check" timing records keep c_before, with c_after = c_before, for the diagnostics), DD never
+runs and no DD model is loaded.
+
 Controller (every 1 / control_rate s): ``ecahd_core.controller``'s pure pursuit along the
 dense local plan, then the remaining waypoints, within max_v, max_w and max_accel. A zero
 command is published when there is no plan, when the odometry is older than ``stale_timeout``
@@ -29,7 +34,10 @@ Publishes:
     local_plan_footprints (visualization_msgs/MarkerArray; reliable, depth 1): the footprint
         outline at each local plan point (blue; red when c^l is still above c_th).
     ecahd/timing (std_msgs/String; reliable, depth 10): JSON {"stage": "j_check" | "dd", "ms",
-        "c_before", "c_after", "stamp"}; "dd" when DD ran (ms = J check + DD).
+        "c_before", "c_after", "stamp"} per segment, "dd" when DD ran (ms = J check + DD); and
+        {"stage": "control", "ms", "stamp"} after every control tick: the wall time of the
+        whole control callback, a J check + DD started in it included (so it is no planning
+        time of its own: ``ecahd eval-bag`` reports its p50 / p99 apart from inference time).
 """
 from __future__ import annotations
 
@@ -70,6 +78,8 @@ PARAMETERS = [
     ParamSpec("global_frame", "map", "frame of plans and odometry poses"),
     ParamSpec("c_th", DenseConfig().c_th, "DD refines a local plan whose collision cost c^l "
                                           "exceeds this"),
+    ParamSpec("dd_enabled", True, "run Dense Diffusion at all; false: follow the straight local "
+                                  "plans (ECAHD w/o DD; J still checked for the diagnostics)"),
     ParamSpec("control_rate", 10.0, "[Hz] cmd_vel rate"),
     ParamSpec("max_v", 0.5, "[m/s] limit on |linear velocity|"),
     ParamSpec("max_w", 1.5, "[rad/s] limit on |angular velocity|"),
@@ -97,6 +107,7 @@ class LocalRefinerParams:
     footprint_padding: float
     global_frame: str
     c_th: float
+    dd_enabled: bool
     control_rate: float
     max_v: float
     max_w: float
@@ -180,8 +191,9 @@ class LocalRefiner(Node):
         self.create_subscription(Path, "plan", self._guard(self._on_plan), PLAN_QOS)
         self.create_subscription(Odometry, "odom", self._guard(self._on_odom), STREAM_QOS)
         self.create_subscription(OccupancyGrid, "map", self._guard(self._on_map), MAP_QOS)
-        self._timer = self.create_timer(self.dt, self._guard(self._on_control))
-        self.get_logger().info(f"local refiner ready: P^l={self.points}, c_th={p.c_th:g}, "
+        self._timer = self.create_timer(self.dt, self._guard(self._on_control_timed))
+        dd = f"DD above c_th={p.c_th:g}" if p.dd_enabled else "DD disabled"
+        self.get_logger().info(f"local refiner ready: P^l={self.points}, {dd}, "
                                f"{p.control_rate:g} Hz, robot {self.footprint.name!r}")
 
     def _guard(self, callback):
@@ -209,15 +221,16 @@ class LocalRefiner(Node):
         p = self.params
         self.planner = None
         grid = msg_to_grid(msg, name=p.map_name)
-        ckpt = load_model("dd", grid, path=p.dd_model or None, footprint=self.footprint,
-                          horizon=self.points)
+        ckpt = (load_model("dd", grid, path=p.dd_model or None, footprint=self.footprint,
+                           horizon=self.points) if p.dd_enabled else None)
         cost_config = CostConfig()
         # only the local stage (local_cost, refine) is used: no SD model here
         self.planner = HierarchicalPlanner(
             None, ckpt, costmap=cost_config.make_costmap(grid),
             footprint_points=self.footprint.points, cost_config=cost_config,
-            dense=DenseConfig(points=self.points, c_th=p.c_th))
-        self.get_logger().info(f"map {grid.name!r} received; DD model and cost J ready")
+            dense=DenseConfig(points=self.points, c_th=p.c_th, enabled=p.dd_enabled))
+        self.get_logger().info(f"map {grid.name!r} received; "
+                               f"{'DD model and ' if p.dd_enabled else ''}cost J ready")
         if self.waypoints is not None:
             self._start_segment()
 
@@ -249,6 +262,16 @@ class LocalRefiner(Node):
             raise PlanningError("odometry with non-finite pose ignored")
         self.pose = xyyaw
         self.odom_time = self.get_clock().now()
+
+    def _on_control_timed(self) -> None:
+        """The control tick, its wall time published as a "control" timing record."""
+        t0 = time.perf_counter()
+        try:
+            self._on_control()
+        finally:
+            ms = (time.perf_counter() - t0) * 1e3
+            self._timing_pub.publish(timing_message(
+                "control", ms, self.get_clock().now().nanoseconds * 1e-9))
 
     def _on_control(self) -> None:
         p = self.params
@@ -290,7 +313,7 @@ class LocalRefiner(Node):
             goal = torch.as_tensor(end, dtype=torch.float32)[None]
             c_before = c_after = float(self.planner.local_cost(seg, goal)[0])
             stage = "j_check"
-            if c_before > p.c_th:  # Algorithm 1 line 15
+            if p.dd_enabled and c_before > p.c_th:  # Algorithm 1 line 15
                 refined, cost = self.planner.refine(seg[:, 0], goal, generator=self.generator)
                 local = refined[0].numpy().astype(np.float64)
                 local[0], local[-1] = start, end

@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from ecahd_core.evaluation import (PAPER_TABLE_III, EpisodeData, evaluate_episode,
-                                   markdown_table, split_episodes, summarize)
+from ecahd_core.evaluation import (PAPER_TABLE_III, EpisodeData, control_times,
+                                   evaluate_episode, markdown_table, split_episodes, summarize)
 from ecahd_core.footprint import make_footprint
 from ecahd_core.maps import GridMap
 
@@ -104,3 +104,25 @@ def test_summary_and_table_list_the_paper_rows():
     table = markdown_table(s, ms)
     assert all(name in table for name in PAPER_TABLE_III)
     assert PAPER_TABLE_III["ECAHD w/ DD"].episode_reward == 46.862
+
+
+def test_control_ticks_are_latency_not_inference_time():
+    # two planning records (1.0 s + 0.25 s) and 100 control ticks of 1..100 ms: the ticks
+    # (which include a J check + DD started in them) must not add to the inference time
+    ticks = np.arange(1.0, 101.0)
+    data = EpisodeData(goal=GOAL, odom=straight_run(10, 1.0),
+                       timing_ms=np.concatenate([[1000.0], ticks, [250.0]]),
+                       timing_stages=["astar"] + ["control"] * 100 + ["j_check"])
+    m = evaluate_episode(data)
+    assert m.inference_time_s == pytest.approx(1.25)
+    assert m.stage_ms == {"astar": 1000.0, "j_check": 250.0}
+    assert m.control_ticks == 100
+    # numpy's linear percentile of 1..100: p50 = 50.5, p99 = 1 + 0.99 * 99 = 99.01
+    assert m.control_ms_p50 == pytest.approx(50.5) and m.control_ms_p99 == pytest.approx(99.01)
+    s = summarize([m], control_ms=control_times(data))
+    assert (s.control_ms_p50, s.control_ms_p99) == (pytest.approx(50.5), pytest.approx(99.01))
+    assert "p99 99.01 ms" in markdown_table(s, [m])
+    assert summarize([m]).control_ms_p50 is None  # no pooled ticks given: not reported
+    # records without a stage count as inference (older bags)
+    assert evaluate_episode(EpisodeData(goal=GOAL, odom=straight_run(10, 1.0),
+                                        timing_ms=np.array([5.0]))).inference_time_s == 0.005

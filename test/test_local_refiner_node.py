@@ -32,7 +32,8 @@ CORNER_PLAN = [(1.5, 1.5), (2.5, 2.5), (2.5, 3.5)]  # cuts wall cell [1, 2] x [2
 
 def params(**over) -> LocalRefinerParams:
     values = dict(dd_model="", map_name="maze2d-large", robot="circle", footprint="",
-                  footprint_padding=0.0, global_frame="map", c_th=0.1, control_rate=10.0,
+                  footprint_padding=0.0, global_frame="map", c_th=0.1, dd_enabled=True,
+                  control_rate=10.0,
                   max_v=0.5, max_w=1.5, max_accel=1.0, lookahead=0.4, waypoint_tolerance=0.3,
                   goal_tolerance=0.25, stale_timeout=1.0, plan_timeout=0.0,
                   enable_stamped_cmd_vel=False, seed=0, torch_threads=1)
@@ -55,7 +56,7 @@ class Rig:
         self.probe.create_subscription(TwistStamped if stamped else Twist, "cmd_vel",
                                        self.cmds.append, 100)
         self.probe.create_subscription(Path, "local_plan", self.local.append, 10)
-        self.probe.create_subscription(String, "ecahd/timing", self.timings.append, 10)
+        self.probe.create_subscription(String, "ecahd/timing", self.timings.append, 100)
         self.map_pub = self.probe.create_publisher(OccupancyGrid, "map", MAP_QOS)
         self.plan_pub = self.probe.create_publisher(Path, "plan", PLAN_QOS)
         self.odom_pub = self.probe.create_publisher(Odometry, "odom", 10)
@@ -87,6 +88,11 @@ class Rig:
         self.spin_until(lambda: self.node.pose is not None
                         and self.node.pose[:2] == pytest.approx((x, y)))
 
+    def segment_timings(self) -> list[dict]:
+        """The per-segment timing records (J check / DD), without the control ticks'."""
+        records = [json.loads(m.data) for m in self.timings]
+        return [r for r in records if r["stage"] != "control"]
+
     def next_cmds(self, n: int) -> list:
         start = len(self.cmds)
         self.spin_until(lambda: len(self.cmds) >= start + n)
@@ -116,11 +122,11 @@ def test_plan_and_odom_give_forward_motion_within_the_limits(rig):
     r.send_map()
     r.send_odom(1.5, 1.5, 0.0)  # facing +x, the first waypoint (2.5, 1.5) straight ahead
     r.send_plan(PLAN)
-    r.spin_until(lambda: r.local and r.timings)
+    r.spin_until(lambda: r.local and r.segment_timings())
     local = path_to_xy(r.local[-1])
     assert local.shape == (4, 2)  # P^l
     np.testing.assert_allclose(local[[0, -1]], [[1.5, 1.5], [2.5, 1.5]])
-    timing = json.loads(r.timings[-1].data)
+    timing = r.segment_timings()[-1]
     assert timing["stage"] == "j_check" and timing["c_before"] <= 0.1  # a free segment
     cmds = r.next_cmds(8)
     v = np.array([c.linear.x for c in cmds])
@@ -136,13 +142,50 @@ def test_colliding_segment_is_refined_by_dd(rig):
     r.send_map()
     r.send_odom(1.5, 1.5, math.pi / 4)
     r.send_plan(CORNER_PLAN)
-    r.spin_until(lambda: r.timings)
-    timing = json.loads(r.timings[-1].data)
+    r.spin_until(lambda: r.segment_timings())
+    timing = r.segment_timings()[-1]
     assert timing["stage"] == "dd" and timing["c_before"] > 0.1
     assert timing["c_after"] < timing["c_before"]  # guided DD moved off the corner
     assert r.node.dd_calls == 1
     local = path_to_xy(r.local[-1])
     np.testing.assert_allclose(local[[0, -1]], [[1.5, 1.5], [2.5, 2.5]], atol=1e-6)
+
+
+def test_dd_disabled_follows_the_straight_plan_and_never_runs_dd(rig, monkeypatch):
+    from ecahd_core.planner import HierarchicalPlanner
+
+    def no_dd(*args, **kwargs):
+        raise AssertionError("DD ran with dd_enabled false")
+
+    monkeypatch.setattr(HierarchicalPlanner, "refine", no_dd)
+    r = rig(dd_enabled=False)
+    r.send_map()
+    assert r.node.planner.dd is None  # no DD model loaded
+    r.send_odom(1.5, 1.5, math.pi / 4)
+    r.send_plan(CORNER_PLAN)  # the segment that DD refines when enabled (test above)
+    r.spin_until(lambda: r.segment_timings())
+    timing = r.segment_timings()[-1]
+    # J still judges the straight plan (diagnostics), above c_th, and nothing refines it
+    assert timing["stage"] == "j_check" and timing["c_before"] > 0.1
+    assert timing["c_after"] == timing["c_before"]
+    assert r.node.dd_calls == 0
+    np.testing.assert_allclose(path_to_xy(r.local[-1]),
+                               np.linspace([1.5, 1.5], [2.5, 2.5], 4), atol=1e-9)
+    assert r.next_cmds(3)  # and it drives
+    assert r.node.dd_calls == 0
+
+
+def test_every_control_tick_publishes_its_wall_time(rig):
+    r = rig()
+    r.send_map()
+    r.send_odom(1.5, 1.5, math.pi / 4)
+    r.send_plan(CORNER_PLAN)  # the first tick after the plan may start a segment (J + DD)
+    cmds = r.next_cmds(5)
+    r.spin_until(lambda: sum(json.loads(m.data)["stage"] == "control" for m in r.timings) >= 5)
+    control = [json.loads(m.data) for m in r.timings if json.loads(m.data)["stage"] == "control"]
+    assert len(control) >= len(cmds) - 1  # one per tick (a record follows its command)
+    for c in control:
+        assert c["ms"] >= 0 and math.isfinite(c["stamp"]) and set(c) == {"stage", "ms", "stamp"}
 
 
 def test_zero_without_a_plan(rig):
