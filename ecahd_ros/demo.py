@@ -4,7 +4,10 @@ and scored against the paper's Table III.
 Composition (one private rclpy Context and domain, one SingleThreadedExecutor spun with
 ``spin_once`` by the episode loop): ``sim_bridge`` (PyBullet, its own simulated clock),
 ``global_planner`` (SD), ``local_refiner`` (J check + DD, 10 Hz control), ``bag_recorder``
-(every default topic into OUT/bag) and a small ``demo`` node that publishes ``goal_pose``.
+(every default topic into OUT/bag) and a small ``demo`` node that publishes ``goal_pose`` and
+listens to ``plan``. ``DemoConfig.planner_params`` / ``refiner_params`` override the planner's
+and refiner's parameters (e.g. ``{"method": "astar"}``, ``{"dd_enabled": False}``: the
+baselines of ``ecahd bench navigation``).
 The planner, refiner and recorder run with ``use_sim_time``: the refiner's 10 Hz control timer,
 its staleness checks and the bag's receive stamps follow ``/clock``, so a control step is 0.1 s
 of simulated time whatever the realtime factor, and planning time stalls simulated time instead
@@ -17,6 +20,10 @@ the refiner stopped (goal reached) for ``hold_steps`` control steps, or after ``
 control steps (max_steps / 10 s of simulated time); the next goal then starts the next episode.
 The episode reward therefore counts the steps within 0.5 m until the episode ends.
 
+Goal -> plan latency: per episode, the wall time (``time.perf_counter``) from publishing the
+goal to the demo node receiving the first ``plan`` that ends at that goal (None if none came
+before the episode ended); in DemoResult and in metrics.json as ``goal_to_plan_ms``.
+
 After the last episode the bag is closed and scored by ``ecahd eval-bag``'s
 :func:`~ecahd_ros.eval_bag.evaluate_bag`: OUT/metrics.json, OUT/metrics.md,
 OUT/trajectories.png.
@@ -28,7 +35,7 @@ import logging
 import math
 import os
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 log = logging.getLogger("ecahd.demo")
@@ -56,6 +63,9 @@ class DemoConfig:
     start: tuple[float, float] | None = None  # explicit start; None: the first problem's
     wall_timeout: float = 540.0  # [s] the whole episode loop
     domain_id: int | None = None  # None: derived from the process id
+    # parameter overrides of the global_planner / local_refiner nodes (name -> value)
+    planner_params: dict = field(default_factory=dict)
+    refiner_params: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         from ecahd_core.errors import EcahdError
@@ -79,6 +89,7 @@ class DemoResult:
     sim_s: float  # [s of sim time] the episode loop
     table: str
     evaluation: object  # eval_bag.BagEvaluation
+    goal_to_plan_ms: tuple  # per episode: [ms wall] goal published -> its first plan, or None
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -108,8 +119,8 @@ def _node_parameters(config: DemoConfig, start) -> dict[str, list]:
                 Parameter("start_x", value=float(start[0])),
                 Parameter("start_y", value=float(start[1])),
                 Parameter("realtime_factor", value=float(config.realtime_factor))],
-        "planner": common,
-        "refiner": common,
+        "planner": common + [Parameter(k, value=v) for k, v in config.planner_params.items()],
+        "refiner": common + [Parameter(k, value=v) for k, v in config.refiner_params.items()],
         "recorder": [Parameter("output", value=str(config.out / "bag")), sim_time],
     }
 
@@ -134,12 +145,13 @@ def run_demo(config: DemoConfig) -> DemoResult:
     """Run the episodes, close the bag, score it and write the outputs."""
     import rclpy
     from geometry_msgs.msg import PoseStamped
+    from nav_msgs.msg import Path as PathMsg
     from rclpy.executors import SingleThreadedExecutor
 
     from ecahd_core.errors import EcahdError
     from ecahd_ros.bag_recorder import BagRecorder
     from ecahd_ros.eval_bag import evaluate_bag, write_outputs
-    from ecahd_ros.global_planner import GlobalPlanner
+    from ecahd_ros.global_planner import PLAN_QOS, GlobalPlanner
     from ecahd_ros.local_refiner import LocalRefiner
     from sim_bridge.node import SimBridge
 
@@ -163,18 +175,31 @@ def run_demo(config: DemoConfig) -> DemoResult:
         if recorder.bag_path is None or not recorder.recording:  # its log says why
             raise EcahdError(f"cannot record into {config.out / 'bag'} (see the recorder's log)")
         goal_pub = demo.create_publisher(PoseStamped, "goal_pose", 10)
+        # goal -> first plan latency of the current episode: goal (x, y), perf_counter when it
+        # was published, the latency [ms] once its first plan arrived
+        latency = {"goal": None, "sent": 0.0, "ms": None}
+
+        def on_plan(msg) -> None:
+            if latency["goal"] is None or latency["ms"] is not None or not msg.poses:
+                return
+            end = msg.poses[-1].pose.position
+            if math.hypot(end.x - latency["goal"][0], end.y - latency["goal"][1]) < 1e-6:
+                latency["ms"] = (time.perf_counter() - latency["sent"]) * 1e3
+
+        demo.create_subscription(PathMsg, "plan", on_plan, PLAN_QOS)
+        goal_to_plan: list[float | None] = []
         executor = SingleThreadedExecutor(context=ctx)
         for node in nodes:
             executor.add_node(node)
 
         # start-up: models loaded (on the latched map), every topic recorded
         t0 = time.monotonic()
-        while not (planner.sparse is not None and refiner.planner is not None
+        while not (planner.ready and refiner.planner is not None
                    and not recorder.pending_topics and goal_pub.get_subscription_count() >= 2):
             executor.spin_once(timeout_sec=0.01)
             if time.monotonic() - t0 > STARTUP_TIMEOUT:
                 raise EcahdError(f"start-up took over {STARTUP_TIMEOUT:g} s: planner "
-                                 f"{planner.sparse is not None}, refiner "
+                                 f"{planner.ready}, refiner "
                                  f"{refiner.planner is not None}, recorder still waiting for "
                                  f"{recorder.pending_topics}")
         log.info("graph ready in %.1f s (domain %d); %d episodes", time.monotonic() - t0,
@@ -187,6 +212,8 @@ def run_demo(config: DemoConfig) -> DemoResult:
             msg.header.stamp = planner.get_clock().now().to_msg()
             msg.pose.position.x, msg.pose.position.y = float(goal[0]), float(goal[1])
             msg.pose.orientation.w = 1.0
+            latency.update(goal=(float(goal[0]), float(goal[1])), ms=None)
+            latency["sent"] = time.perf_counter()
             goal_pub.publish(msg)
             t_start, held_since = sim.sim.state.t, None
             s = sim.sim.state
@@ -211,6 +238,9 @@ def run_demo(config: DemoConfig) -> DemoResult:
                 if time.monotonic() - wall0 > config.wall_timeout:
                     raise EcahdError(f"the episodes took over {config.wall_timeout:g} s wall "
                                      "time")
+            goal_to_plan.append(latency["ms"])
+            if latency["ms"] is None:
+                log.warning("episode %d: no plan to the goal arrived", i)
         wall_s, sim_s = time.monotonic() - wall0, sim.sim.state.t - sim0
         executor.remove_node(sim)  # no more steps: the last episode ends here in the bag too
         t_end = time.monotonic()
@@ -229,10 +259,12 @@ def run_demo(config: DemoConfig) -> DemoResult:
                               goal_radius=config.goal_radius, max_steps=config.max_steps)
     paths = {k: config.out / n for k, n in (("json", "metrics.json"), ("md", "metrics.md"),
                                             ("png", "trajectories.png"))}
+    shown = ", ".join("-" if ms is None else f"{ms:.1f}" for ms in goal_to_plan)
     table = write_outputs(evaluation, bag, json_path=paths["json"], md_path=paths["md"],
-                          png_path=paths["png"])
+                          png_path=paths["png"], extra={"goal_to_plan_ms": goal_to_plan},
+                          notes=f"\nGoal -> first plan (wall time, per episode): {shown} ms.\n")
     return DemoResult(bag=bag, wall_s=wall_s, sim_s=sim_s, table=table, evaluation=evaluation,
-                      **paths)
+                      goal_to_plan_ms=tuple(goal_to_plan), **paths)
 
 
 def run(args: argparse.Namespace) -> int:

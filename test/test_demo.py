@@ -3,6 +3,8 @@ recorded, then scored by ``ecahd eval-bag``."""
 import argparse
 import json
 
+import pytest
+
 from ecahd_ros import eval_bag
 from ecahd_ros.bag_recorder import DEFAULT_TOPICS, read_bag
 from ecahd_ros.demo import DemoConfig, run_demo
@@ -24,6 +26,15 @@ def test_short_demo_records_every_topic_and_eval_bag_scores_it(tmp_path):
     assert episode["reached"] and episode["first_reach"] is not None
     assert 0 < episode["control_steps"] <= 150
     assert episode["inference_time_s"] > 0
+    # goal -> first plan latency, per episode, in the result and metrics.json
+    assert len(result.goal_to_plan_ms) == 1 and 0 < result.goal_to_plan_ms[0] < 10_000
+    assert json.loads(result.json.read_text())["goal_to_plan_ms"] == list(result.goal_to_plan_ms)
+    # every control tick was timed; the ticks are not inference time
+    mean = json.loads(result.json.read_text())["mean"]
+    assert 0 < mean["control_ms_p50"] <= mean["control_ms_p99"]
+    assert episode["control_ticks"] > 0 and "control" not in episode["stage_ms"]
+    assert episode["inference_time_s"] == pytest.approx(sum(episode["stage_ms"].values()) / 1000)
+    assert "p99" in result.md.read_text()
 
     # the command on the same bag writes the same keys
     parser = argparse.ArgumentParser()
