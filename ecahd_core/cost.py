@@ -107,10 +107,14 @@ class CostTerms:
     Attributes:
         dist_cost: (B,) mean squared distance of the points to the goal [m^2].
         collision_cost: (B,) summed map cost, already scaled by sigma_dist / sigma_col.
+        peak_cost: (B,) the largest single cost-map lookup of each trajectory (unscaled; 0 when
+            every sample is farther than the margin from obstacles, 1 on an obstacle edge), or
+            None where not computed (the loop reference).
     """
 
     dist_cost: torch.Tensor
     collision_cost: torch.Tensor
+    peak_cost: torch.Tensor | None = None
 
     @property
     def total(self) -> torch.Tensor:
@@ -163,7 +167,8 @@ def trajectory_cost(traj: torch.Tensor, goal, footprint_points, costmap: CostMap
     cost = cmap.sample(xy, dim=pair_dim)  # (B, P), (B, M) or (B, M, R): lines 19-20
     collision = cost.sum(dim=tuple(range(1, cost.ndim)))  # (B,) line 21
     collision_cost = collision * (sigma_dist / sigma_col)  # line 24
-    return CostTerms(dist_cost=dist_cost, collision_cost=collision_cost)
+    peak = cost.detach().flatten(1).amax(dim=1)  # (B,)
+    return CostTerms(dist_cost=dist_cost, collision_cost=collision_cost, peak_cost=peak)
 
 
 def pose_headings(traj: torch.Tensor) -> torch.Tensor:

@@ -12,7 +12,7 @@ Selection rules for the best of N candidates t^{g,(i)} (Sec. III-A):
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
@@ -30,7 +30,12 @@ class SparseConfig:
         num_candidates: I, candidates sampled in one batch (isSearchEnabled when > 1).
         horizon: P^g, waypoints of a global plan.
         epsilon: [m] goal-reaching radius of the selection rule (paper: 1.0).
-        selection: one of SELECTION_RULES.
+        selection: one of SELECTION_RULES. "shortest_reaching" (Sec. III-A's rule, Algorithm 1
+            line 10) here, as it needs no cost J; the commands and nodes default to
+            "collision_aware" (it needs J): the paper's Table III runs select "the trajectory
+            with the highest score based on the diffusion prediction and cost function"
+            (Sec. IV-C), and with polishing it raised HD's collision-free share on 32 held-out
+            problems from 93.8% to 100% for the quadruped (docs/RESULTS.md).
         collision_tolerance: slack on the collision cost for ``collision_aware``.
         num_steps: DDIM steps (None: the checkpoint's).
         eta: DDIM eta. 1.0 (stochastic, DDPM-like) by default: on 128 held-out problems the
@@ -194,6 +199,11 @@ class DenseConfig:
         max_guide_norm: cap of the per-waypoint guidance gradient (see diffusion.sampler).
         guidance_space: "eps" (Algorithm 2 as written) or "x0" (J at the clean estimate,
             step-dependent weight; see diffusion.sampler.sample).
+        polish_steps: our second safety rule, beyond the paper: when a local plan's collision
+            cost is still above c_th after DD, descend J's collision cost over its points for
+            up to this many steps (ecahd_core.polish; the start and the final goal stay fixed,
+            an intermediate waypoint may move). 0 is the paper's behaviour.
+        polish_step_size: [m] the largest point move per polishing step.
     """
 
     points: int = 4
@@ -207,6 +217,16 @@ class DenseConfig:
     guide_last: int | None = None
     max_guide_norm: float | None = 1.0
     guidance_space: str = "x0"
+    polish_steps: int = 30
+    polish_step_size: float = 0.05
+
+    def __post_init__(self) -> None:
+        self.polish_config()  # validates the polishing settings
+
+    def polish_config(self):
+        from ecahd_core.polish import PolishConfig
+
+        return PolishConfig(steps=self.polish_steps, step_size=self.polish_step_size)
 
 
 @dataclass(frozen=True)
@@ -219,7 +239,8 @@ class HierarchicalPlan:
         segments: the local plan t^l_p of every iteration, each (P^l, 2) [m].
         dd_segments: per iteration, whether DD replaced the straight local plan.
         local_costs: per iteration, (c^l before DD, c^l after DD or the same).
-        timings_ms: wall time per stage: "sd", "j_check", "dd", "total".
+        timings_ms: wall time per stage: "sd", "j_check", "dd", "polish", "total".
+        polished: per iteration, whether polishing moved the local plan (see DenseConfig).
     """
 
     trajectory: np.ndarray
@@ -228,6 +249,7 @@ class HierarchicalPlan:
     dd_segments: list
     local_costs: list
     timings_ms: dict
+    polished: list = field(default_factory=list)
 
     @property
     def dd_calls(self) -> int:
@@ -311,14 +333,29 @@ class HierarchicalPlanner:
                 break
         return best, best_cost
 
+    def polish(self, paths: torch.Tensor, fixed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Our safety rule (DenseConfig.polish_steps): descend J's collision cost.
+        paths: (B, P, 2) [m], fixed: (P,) or (B, P) bool -> (paths (B, P, 2), costs (B,)),
+        float32 on the CPU."""
+        from ecahd_core.polish import polish_paths
+
+        out, cost = polish_paths(paths, fixed, self.costmap, self.footprint_points,
+                                 self.cost_config, self.dense.polish_config())
+        return out.float().cpu(), cost.float().cpu()
+
+    @property
+    def polishing(self) -> bool:
+        """Whether the polishing rule is on (it follows DD: off when DD is disabled)."""
+        return self.dd is not None and self.dense.polish_steps > 0
+
     def plan(self, start, goal, *, generator: torch.Generator | None = None) -> HierarchicalPlan:
         """Run Algorithm 1 from ``start`` to ``goal`` ((2,) [m] each)."""
         P_g, P_l = self.sparse.config.horizon, self.dense.points
         S = torch.as_tensor(np.asarray(start, dtype=np.float32))
         G = torch.as_tensor(np.asarray(goal, dtype=np.float32))
         t_total = time.perf_counter()
-        times = {"sd": 0.0, "j_check": 0.0, "dd": 0.0}
-        global_plans, segments, dd_used, costs = [], [], [], []
+        times = {"sd": 0.0, "j_check": 0.0, "dd": 0.0, "polish": 0.0}
+        global_plans, segments, dd_used, costs, polished = [], [], [], [], []
         frac = torch.linspace(0.0, 1.0, P_l)[:, None]
         if self.replan == "once":
             return self._plan_once(S, G, generator, t_total)
@@ -340,23 +377,35 @@ class HierarchicalPlanner:
                 local, c_after = seg[0], float(cost[0])
                 times["dd"] += (time.perf_counter() - t0) * 1e3
                 used = True
+            moved = self.polishing and c_after > self.dense.c_th
+            if moved:  # our rule: the start stays, the end too when it is the goal
+                t0 = time.perf_counter()
+                fixed = torch.zeros(P_l, dtype=torch.bool)
+                fixed[0], fixed[-1] = True, p == P_g - 2
+                seg, cost = self.polish(local[None], fixed)
+                local, c_after = seg[0], float(cost[0])
+                times["polish"] += (time.perf_counter() - t0) * 1e3
             global_plans.append(waypoints)
             segments.append(local.numpy().astype(np.float64))
             dd_used.append(used)
+            polished.append(moved)
             costs.append((c, c_after))
-            S = local[-1].clone()  # MoveAgent: the end of the local plan (= t^g[1])
+            S = local[-1].clone()  # MoveAgent: the end of the local plan (t^g[1] unless polished)
         traj = np.concatenate([segments[0]] + [s[1:] for s in segments[1:]])
         times["total"] = (time.perf_counter() - t_total) * 1e3
         return HierarchicalPlan(trajectory=traj, global_plans=global_plans, segments=segments,
-                                dd_segments=dd_used, local_costs=costs, timings_ms=times)
+                                dd_segments=dd_used, local_costs=costs, timings_ms=times,
+                                polished=polished)
 
     def _plan_once(self, S: torch.Tensor, G: torch.Tensor, generator, t_total: float
                    ) -> HierarchicalPlan:
         """Algorithm 1 with one SD plan: every iteration's local stage depends on that plan only,
         so all straight local plans are checked by J in one batch and all segments above c_th are
-        refined by DD in one batch (the same results as iterating, P^g - 1 times fewer calls)."""
+        refined by DD in one batch (the same results as iterating, P^g - 1 times fewer calls).
+        Polishing (when on and some local plan is still above c_th) descends J over the whole
+        joined path at once, start and goal fixed, so neighbouring segments stay joined."""
         P_g, P_l = self.sparse.config.horizon, self.dense.points
-        times = {"sd": 0.0, "j_check": 0.0, "dd": 0.0}
+        times = {"sd": 0.0, "j_check": 0.0, "dd": 0.0, "polish": 0.0}
         t0 = time.perf_counter()
         waypoints = self.sparse.plan(S.numpy(), G.numpy(), horizon=P_g,
                                      generator=generator).waypoints
@@ -377,6 +426,20 @@ class HierarchicalPlanner:
             local[idx] = seg
             c_after[idx] = cost
             times["dd"] = (time.perf_counter() - t0) * 1e3
+        polished = torch.zeros_like(used)
+        if self.polishing and bool((c_after > self.dense.c_th).any()):
+            t0 = time.perf_counter()
+            K = local.shape[0]  # join, polish the whole path, split again
+            joined = torch.cat([local[:1, 0], local[:, 1:].reshape(-1, 2)])[None]
+            fixed = torch.zeros(joined.shape[1], dtype=torch.bool)
+            fixed[0] = fixed[-1] = True
+            joined, _ = self.polish(joined, fixed)
+            idx = torch.arange(K)[:, None] * (P_l - 1) + torch.arange(P_l)[None]
+            new = joined[0][idx]  # (K, P^l, 2)
+            polished = (new - local).abs().amax(dim=(1, 2)) > 0
+            local = new
+            c_after = self.local_cost(local, local[:, -1]).float().cpu()
+            times["polish"] = (time.perf_counter() - t0) * 1e3
         segments = [seg.numpy().astype(np.float64) for seg in local]
         traj = np.concatenate([segments[0]] + [sg[1:] for sg in segments[1:]])
         times["total"] = (time.perf_counter() - t_total) * 1e3
@@ -384,7 +447,7 @@ class HierarchicalPlanner:
                                 global_plans=[waypoints[p:] for p in range(P_g - 1)],
                                 segments=segments, dd_segments=used.tolist(),
                                 local_costs=list(zip(c.tolist(), c_after.tolist())),
-                                timings_ms=times)
+                                timings_ms=times, polished=polished.tolist())
 
 
 class FullDiffusion:

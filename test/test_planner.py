@@ -33,7 +33,7 @@ def test_algorithm1_reaches_goal_in_pg_iterations():
     # consecutive local plans are joined end to start
     for a, b in zip(plan.segments, plan.segments[1:]):
         assert np.allclose(a[-1], b[0])
-    assert set(plan.timings_ms) == {"sd", "j_check", "dd", "total"}
+    assert set(plan.timings_ms) == {"sd", "j_check", "dd", "polish", "total"}
 
 
 @pytest.mark.parametrize("c_th", [0.1, 1e9])
@@ -76,3 +76,26 @@ def test_replan_once_samples_sd_once_and_follows_it():
     assert plan.dd_segments == [c > hd.dense.c_th for c, _ in plan.local_costs]
     for a, b in zip(plan.segments, plan.segments[1:]):
         assert np.allclose(a[-1], b[0])
+
+
+@pytest.mark.parametrize("replan", ["every_waypoint", "once"])
+def test_polishing_moves_only_colliding_local_plans_and_keeps_start_and_goal(replan):
+    fp = make_footprint("circle")
+    cc = CostConfig()
+    sd = SparseDiffusion(load_model("sd", GRID, footprint=fp), SparseConfig(num_candidates=4))
+    start, goal = np.array([1.5, 1.5]), np.array([10.5, 7.5])
+    plans = {}
+    for steps in (0, 30):
+        hd = HierarchicalPlanner(sd, load_model("dd", GRID, footprint=fp),
+                                 costmap=cc.make_costmap(GRID), footprint_points=fp.points,
+                                 cost_config=cc, dense=DenseConfig(polish_steps=steps),
+                                 replan=replan)
+        plans[steps] = hd.plan(start, goal, generator=torch.Generator().manual_seed(0))
+    paper, ours = plans[0], plans[30]
+    assert not any(paper.polished) and paper.timings_ms["polish"] == 0.0
+    assert any(ours.polished)
+    assert np.allclose(ours.trajectory[0], start) and np.allclose(ours.trajectory[-1], goal, atol=1e-5)
+    for a, b in zip(ours.segments, ours.segments[1:]):
+        assert np.allclose(a[-1], b[0])  # still joined end to start
+    # the polished path's total collision cost is below the paper's
+    assert sum(c for _, c in ours.local_costs) < sum(c for _, c in paper.local_costs)

@@ -64,11 +64,13 @@ class PlanningBenchSettings:
     robots: tuple[str, ...] = ROBOTS
     methods: tuple[str, ...] = METHODS
     candidates: int = 10
+    selection: str = "collision_aware"  # ours; "shortest_reaching" is Sec. III-A's rule
     guidance_weight: float = 0.03  # DenseConfig's default
     guidance_space: str = "x0"  # DenseConfig's default
     margin: float = 0.1
     c_th: float = 0.1
     dd_retries: int = 0
+    polish_steps: int = 30  # DenseConfig's default; 0 = the paper's Algorithm 1
     replan: str = "every_waypoint"
     ablation: bool = True
 
@@ -161,7 +163,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
             plan_fn = lambda s, g: (fd.plan(s, g, generator=gen), None)  # noqa: E731
         else:
             sd = SparseDiffusion(load_model("sd", grid, footprint=fp), SparseConfig(
-                num_candidates=settings.candidates, guidance=(method == "sd" and guidance),
+                num_candidates=settings.candidates, selection=settings.selection, guidance=(method == "sd" and guidance),
                 guidance_weight=settings.guidance_weight,
                 guidance_space=settings.guidance_space), cost=cost)
             if method == "sd":
@@ -173,7 +175,8 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                                              c_th=settings.c_th, guidance=guidance,
                                              guidance_weight=settings.guidance_weight,
                                              guidance_space=settings.guidance_space,
-                                             retries=settings.dd_retries),
+                                             retries=settings.dd_retries,
+                                             polish_steps=settings.polish_steps),
                                          replan=settings.replan)
 
                 def plan_fn(s, g):
@@ -212,9 +215,11 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                 ablation.append(cell)
     context = {"map": grid.name, "problems": len(problems), "seed": settings.seed,
                "sample_seed": settings.sample_seed, "candidates": settings.candidates,
+               "selection": settings.selection,
                "guidance_weight": settings.guidance_weight, "c_th": settings.c_th,
                "guidance_space": settings.guidance_space, "margin": settings.margin,
-               "dd_retries": settings.dd_retries, "replan": settings.replan,
+               "dd_retries": settings.dd_retries, "polish_steps": settings.polish_steps,
+               "replan": settings.replan,
                "torch": torch.__version__,
                "threads": torch.get_num_threads()}
     return PlanningBenchResult(cells=cells, ablation=ablation, examples=examples,
@@ -234,9 +239,11 @@ def format_markdown(r: PlanningBenchResult) -> str:
     head = " | ".join(f"{METHOD_LABELS[m]} {'✓' if g else '×'}" + (" (ECAHD)" if (m, g) == ("hd", True) else "")
                       for m, g in cols)
     lines = [f"Planning on {c['map']}: {c['problems']} held-out problems (seed {c['seed']}), "
-             f"sampling seed {c['sample_seed']}, best of {c['candidates']} SD candidates, "
+             f"sampling seed {c['sample_seed']}, best of {c['candidates']} SD candidates "
+             f"({c.get('selection', 'shortest_reaching')}), "
              f"omega {c['guidance_weight']} ({c['guidance_space']} space), c_th {c['c_th']}, "
              f"cost-map margin {c['margin']} m, DD retries {c['dd_retries']}, "
+             f"polishing steps {c.get('polish_steps', 0)}, "
              f"SD replanning {c['replan']}, "
              f"torch {c['torch']} with {c['threads']} thread(s). Each cell: ours / paper.", "",
              f"| metric | robot | {head} |", "|---|---|" + "---|" * len(cols)]

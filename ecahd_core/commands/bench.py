@@ -168,6 +168,7 @@ def _run_sd_quality(args: argparse.Namespace) -> int:
 # -------------------------------------------------------------------------------- planning
 def _add_planning_arguments(parser: argparse.ArgumentParser) -> None:
     from ecahd_core.bench.planning import METHODS, ROBOTS, PlanningBenchSettings
+    from ecahd_core.planner import SELECTION_RULES
 
     d = PlanningBenchSettings()
     parser.add_argument("--map", default=d.map, help="built-in maze or Nav2 map YAML")
@@ -179,6 +180,8 @@ def _add_planning_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--methods", nargs="+", default=list(d.methods), choices=METHODS)
     parser.add_argument("--candidates", type=_int_at_least(1), default=d.candidates,
                         help="SD candidates per plan (best of N)")
+    parser.add_argument("--selection", default=d.selection, choices=SELECTION_RULES,
+                        help="SD best-of-N rule: the paper's, or ours weighing J")
     parser.add_argument("--omega", type=float, default=d.guidance_weight, help="guidance weight")
     parser.add_argument("--guidance-space", default=d.guidance_space, choices=("eps", "x0"),
                         help="where J is evaluated and how omega is scaled (diffusion.sampler)")
@@ -187,6 +190,9 @@ def _add_planning_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--c-th", type=float, default=d.c_th, help="DD trigger threshold")
     parser.add_argument("--dd-retries", type=_int_at_least(0), default=d.dd_retries,
                         help="our safety rule: resample DD while still colliding (0: paper)")
+    parser.add_argument("--polish-steps", type=_int_at_least(0), default=d.polish_steps,
+                        help="our safety rule: descend J on local plans still above c_th "
+                             "(0: paper)")
     parser.add_argument("--replan", default=d.replan, choices=("every_waypoint", "once"),
                         help="HD: SD best-of-N at every waypoint (Algorithm 1) or once")
     parser.add_argument("--no-ablation", action="store_true", help="skip Table II")
@@ -209,8 +215,10 @@ def _run_planning(args: argparse.Namespace) -> int:
     settings = PlanningBenchSettings(
         map=args.map, problems=args.problems, seed=args.seed, sample_seed=args.sample_seed,
         robots=tuple(args.robots), methods=tuple(args.methods), candidates=args.candidates,
+        selection=args.selection,
         guidance_weight=args.omega, guidance_space=args.guidance_space, margin=args.margin,
-        c_th=args.c_th, dd_retries=args.dd_retries, replan=args.replan,
+        c_th=args.c_th, dd_retries=args.dd_retries, polish_steps=args.polish_steps,
+        replan=args.replan,
         ablation=not args.no_ablation)
     result = run_planning_benchmark(settings, progress=not args.no_progress)
     md = format_markdown(result)

@@ -45,8 +45,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="number of sparse waypoints reported (P^g)")
     p.add_argument("--candidates", type=int, default=10,
                    help="diffusion candidates sampled in one batch (best of N)")
-    p.add_argument("--selection", default="shortest_reaching",
-                   choices=("shortest_reaching", "collision_aware"), help="best-of-N rule")
+    p.add_argument("--selection", default="collision_aware",
+                   choices=("shortest_reaching", "collision_aware"),
+                   help="best-of-N rule: the paper's Sec. III-A rule or J-aware (default)")
+    p.add_argument("--polish-steps", type=int, default=None,
+                   help="ECAHD/HD: J-descent steps on local plans still above c_th (ours, "
+                        "beyond the paper; 0: the paper's Algorithm 1; default DenseConfig's)")
     p.add_argument("--seed", type=int, default=0, help="sampling seed")
     p.add_argument("--sd-model", default=None, help="SD checkpoint (default: the shipped one)")
     p.add_argument("--dd-model", default=None, help="DD checkpoint (default: the shipped one)")
@@ -133,6 +137,7 @@ def _plan_diffusion(args, grid, footprint, start, goal):
     from ecahd_core.planner import (DenseConfig, FullDiffusion, HierarchicalPlanner, SparseConfig,
                                     SparseDiffusion)
 
+    polish = {} if args.polish_steps is None else {"polish_steps": args.polish_steps}
     guided = _guided(args)
     cc = CostConfig()
     cost = (cc.make_costmap(grid), torch.as_tensor(footprint.points, dtype=torch.float32), cc)
@@ -161,7 +166,7 @@ def _plan_diffusion(args, grid, footprint, start, goal):
                 0, None)
     hd = HierarchicalPlanner(sd, load_model("dd", grid, path=args.dd_model, footprint=footprint),
                              costmap=cost[0], footprint_points=footprint.points, cost_config=cc,
-                             dense=DenseConfig(guidance=guided))
+                             dense=DenseConfig(guidance=guided, **polish))
     hd.plan(start, goal, generator=gen())  # warm-up
     plan = hd.plan(start, goal, generator=gen())
     # footprint outlines where DD fired

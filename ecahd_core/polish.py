@@ -1,0 +1,102 @@
+"""Polishing: a few steps of gradient descent on J's collision cost, our safety rule beyond the
+paper (ECAHD's Algorithm 1 accepts whatever DD returns).
+
+Why: J guides DD, but guidance is a nudge inside a stochastic sampler with only 10 DDIM steps;
+with 0.1 m to spare on each side of the circle robot in maze2d-large's 1 m corridors, no guided
+sample we drew was collision-free for that robot over a whole problem (docs/RESULTS.md). The
+same J, descended directly on the points of the path, centres the path in the corridor: the
+diffusion models choose the route, the descent makes it clear the walls.
+
+The step is normalised per path: the point with the largest gradient moves ``step_size`` m, the
+others proportionally less, so the step is in metres whatever J's scale (J sums thousands of
+cost-map lookups); points marked fixed (the start, the goal) never move. A path is done when
+every swept footprint sample J reads lies at least ``clearance`` m from obstacles (its largest
+cost-map lookup is at most 1 - clearance / margin), or when its collision cost is at most
+``tolerance``; otherwise it runs ``steps`` steps. The lowest-cost iterate of each path is
+returned, so polishing never makes a path's J worse.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from ecahd_core.errors import EcahdError
+
+
+@dataclass(frozen=True, kw_only=True)
+class PolishConfig:
+    """Settings of :func:`polish_paths`.
+
+    Attributes:
+        steps: gradient steps at most (0 disables polishing).
+        step_size: [m] how far the point with the largest gradient moves per step (constant:
+            a linear decay to 0 was measured and did worse for the circle robot, 93.8% vs
+            96.9% collision-free on 32 problems).
+        clearance: [m] a path whose swept footprint samples all keep this distance from
+            obstacles is done (only meaningful below the cost map's margin).
+        tolerance: a path whose collision cost is at most this is done.
+    """
+
+    steps: int = 30
+    step_size: float = 0.05
+    clearance: float = 0.1
+    tolerance: float = 1e-6
+
+    def __post_init__(self) -> None:
+        if self.steps < 0:
+            raise EcahdError(f"polish steps must be >= 0, got {self.steps}")
+        if not self.step_size > 0:
+            raise EcahdError(f"polish step_size must be > 0 m, got {self.step_size}")
+        if not self.clearance >= 0:
+            raise EcahdError(f"polish clearance must be >= 0 m, got {self.clearance}")
+        if not self.tolerance >= 0:
+            raise EcahdError(f"polish tolerance must be >= 0, got {self.tolerance}")
+
+
+def polish_paths(paths: torch.Tensor, fixed: torch.Tensor, costmap, footprint_points,
+                 cost_config=None, config: PolishConfig | None = None
+                 ) -> tuple[torch.Tensor, torch.Tensor]:
+    """Descend J's collision cost over the free points of a batch of paths.
+
+    Args:
+        paths: (B, P, 2) [m] paths in the map frame.
+        fixed: (P,) or (B, P) bool, True where a point must not move.
+        costmap, footprint_points ((R, 2) [m]), cost_config: the cost J (ecahd_core.cost).
+        config: PolishConfig.
+
+    Returns:
+        (paths (B, P, 2), collision_cost (B,)): the lowest-cost iterate of every path and its
+        collision cost; float32 on the cost map's device.
+    """
+    from ecahd_core.cost import CostConfig, trajectory_cost
+
+    cfg = config or PolishConfig()
+    cc = cost_config or CostConfig()
+    x = torch.as_tensor(paths).to(device=costmap.device, dtype=costmap.dtype).clone()
+    if x.ndim != 3 or x.shape[-1] != 2:
+        raise EcahdError(f"paths must be (B, P, 2), got {tuple(x.shape)}")
+    B, P, _ = x.shape
+    fixed = torch.as_tensor(fixed, dtype=torch.bool, device=x.device).expand(B, P)
+    fp = torch.as_tensor(footprint_points, dtype=x.dtype, device=x.device)
+    kwargs = cc.cost_kwargs()
+    peak_limit = max(0.0, 1.0 - cfg.clearance / costmap.margin)
+    best, best_cost = x.clone(), torch.full((B,), float("inf"), dtype=x.dtype, device=x.device)
+    active = torch.arange(B, device=x.device)
+    for step in range(cfg.steps + 1):
+        xa = x[active].requires_grad_(True)
+        with torch.enable_grad():
+            terms = trajectory_cost(xa, xa[:, -1].detach(), fp, costmap, **kwargs)
+            (grad,) = torch.autograd.grad(terms.collision_cost.sum(), xa)
+        cost = terms.collision_cost.detach()
+        better = cost < best_cost[active]
+        best[active[better]] = xa.detach()[better]
+        best_cost[active[better]] = cost[better]
+        keep = (cost > cfg.tolerance) & (terms.peak_cost > peak_limit)
+        if step == cfg.steps or not keep.any():
+            break
+        active, grad, xa = active[keep], grad[keep], xa.detach()[keep]
+        grad = grad.masked_fill(fixed[active][..., None], 0.0)
+        scale = grad.norm(dim=-1).amax(dim=1).clamp_min(1e-12)  # (B',) largest point gradient
+        x[active] = xa - cfg.step_size * grad / scale[:, None, None]
+    return best, best_cost
