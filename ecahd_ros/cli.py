@@ -4,7 +4,8 @@
     ecahd map       describe a map, export it as Nav2 YAML + PGM, draw it
     ecahd dataset   generate A* expert data for training
     ecahd train     train one diffusion model;  ecahd train-all: a map's dataset and all models
-    ecahd bench     benchmarks (cost, sampling, sd-quality, planning)
+    ecahd bench     benchmarks (cost, sampling, sd-quality, planning; navigation: Table III in
+                    closed loop, the one that needs rclpy)
     ecahd demo      the closed loop in simulation, recorded and scored;  ecahd eval-bag: score a bag
 
 Subcommand modules keep their heavy imports (torch, rclpy) inside ``run``, so building the parser
@@ -32,7 +33,9 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "eval-bag": ("ecahd_ros.eval_bag",
                  "Table III metrics of a recorded closed-loop bag (JSON, markdown, PNG)"),
     "config": ("ecahd_ros.config_doc", "print / write the parameters of every node as ROS YAML"),
-    "bench": ("ecahd_core.commands.bench", "run a benchmark and print ratios against a reference"),
+    # the core's benchmarks (ecahd_core.commands.bench) plus the closed-loop one
+    "bench": ("ecahd_ros.bench_navigation:bench",
+              "run a benchmark and print ratios against a reference"),
 }
 
 

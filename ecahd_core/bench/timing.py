@@ -16,3 +16,22 @@ def median_ms(fn: Callable[[], object], repeats: int, warmup: int = 0) -> float:
         fn()
         times.append(time.perf_counter() - t0)
     return 1e3 * statistics.median(times)
+
+
+def machine_info() -> dict:
+    """What a timing was measured on: CPU model (``/proc/cpuinfo``, else ``platform``), logical
+    CPUs, torch's version and intra-op thread count, Python's version."""
+    import os
+    import platform
+
+    import torch
+
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as f:
+            cpu = next((line.split(":", 1)[1].strip() for line in f
+                        if line.startswith("model name")), cpu)
+    except OSError:
+        pass
+    return {"cpu": cpu, "logical_cpus": os.cpu_count(), "torch": torch.__version__,
+            "torch_threads": torch.get_num_threads(), "python": platform.python_version()}

@@ -1,0 +1,373 @@
+"""``ecahd bench navigation``: the paper's Table III in closed loop, ECAHD and its baselines
+driven through the same seeded goals by the same ROS 2 graph.
+
+Every variant is one ``ecahd demo`` run (:func:`ecahd_ros.demo.run_demo`: sim_bridge,
+global_planner, local_refiner and bag_recorder in one process, on a fresh ROS domain), the
+same map, robot, seed (hence goals and start) and controller; only the nodes' parameters
+differ (:data:`VARIANTS`):
+
+    ECAHD w/ DD           global_planner method sd, local_refiner dd_enabled true (the paper's)
+    ECAHD w/o DD          sd, dd_enabled false: the straight local plans are followed
+    A* + controller       astar (one whole A* path per goal), dd_enabled false
+    FD, no local planner  fd (one 100-point Full Diffusion path per goal), dd_enabled false
+
+Each bag is scored by ``ecahd eval-bag`` (``ecahd_core.evaluation``): episode reward, first
+reach, collision rate (% of sim steps in contact; and the exact swept-footprint checker's share
+of driven poses in a wall), inference time per episode (planning records only), reached
+episodes, the control callback's p50 / p99 wall time and the goal -> first plan latency. The
+table puts the paper's Table III columns beside ours; the markdown states the control period,
+the velocity limits and the machine.
+
+``--results FILE`` puts the markdown and the command line into FILE between the lines
+``<!-- bench-navigation:begin -->`` and ``<!-- bench-navigation:end -->`` (replacing what was
+there), or appends them as a new section when FILE has no such block.
+
+This module also assembles ``ecahd bench``: the core's benchmarks
+(``ecahd_core.commands.bench.BENCHMARKS``, no rclpy) plus ``navigation``, which needs rclpy and
+so lives here; rclpy is imported only when the navigation benchmark runs.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import shlex
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+log = logging.getLogger("ecahd.bench.navigation")
+
+BEGIN = "<!-- bench-navigation:begin -->"
+END = "<!-- bench-navigation:end -->"
+SECTION = "## Closed-loop navigation (Table III)"
+HELP = "Table III in closed loop: ECAHD w/ and w/o DD, A* and FD baselines on the same goals"
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One column of the table: the parameters its global_planner and local_refiner get."""
+
+    key: str  # the name --variants takes
+    label: str
+    planner_params: dict
+    refiner_params: dict
+
+
+VARIANTS: tuple[Variant, ...] = (
+    Variant("ecahd", "ECAHD w/ DD", {"method": "sd"}, {"dd_enabled": True}),
+    Variant("ecahd-no-dd", "ECAHD w/o DD", {"method": "sd"}, {"dd_enabled": False}),
+    Variant("astar", "A* + controller", {"method": "astar"}, {"dd_enabled": False}),
+    Variant("fd", "FD, no local planner", {"method": "fd"}, {"dd_enabled": False}),
+)
+VARIANT_KEYS = tuple(v.key for v in VARIANTS)
+
+
+@dataclass(frozen=True, kw_only=True)
+class NavigationBenchSettings:
+    """Settings shared by every variant (defaults: ``ecahd demo``'s)."""
+
+    episodes: int = 3
+    seed: int = 0
+    robot: str = "circle"
+    map: str = "maze2d-large"
+    variants: tuple[str, ...] = VARIANT_KEYS
+    realtime_factor: float = 4.0
+    max_steps: int = 800
+    domain_id: int | None = None  # the first variant's; the others count up. None: from the pid
+
+
+@dataclass
+class VariantResult:
+    """One variant's run: its means and episodes (eval-bag's dicts), latencies and wall times."""
+
+    key: str
+    label: str
+    summary: dict  # ecahd_core.evaluation.Summary.to_dict()
+    episodes: list  # [EpisodeMetrics.to_dict()]
+    goal_to_plan_ms: list  # per episode, None when no plan came
+    wall_s: float  # [s] the whole run: start-up, episodes, scoring
+    episodes_wall_s: float  # [s] the episode loop
+    sim_s: float  # [s of sim time] the episode loop
+    out: str  # the run's folder (bag, metrics.json, metrics.md, trajectories.png)
+
+    @property
+    def exact_penetration(self) -> float | None:
+        """Mean share [%] of driven poses the exact checker finds in a wall."""
+        values = [e["penetration_fraction"] for e in self.episodes
+                  if e.get("penetration_fraction") is not None]
+        return 100.0 * sum(values) / len(values) if values else None
+
+
+@dataclass
+class NavigationBenchResult:
+    settings: NavigationBenchSettings
+    variants: list  # [VariantResult]
+    context: dict = field(default_factory=dict)  # limits, machine
+
+    def to_dict(self) -> dict:
+        from dataclasses import asdict
+
+        from ecahd_core.evaluation import PAPER_TABLE_III
+
+        return {"settings": asdict(self.settings), "context": self.context,
+                "variants": [{**asdict(v), "exact_penetration_pct": v.exact_penetration}
+                             for v in self.variants],
+                "paper_table_iii": {k: vars(v) for k, v in PAPER_TABLE_III.items()}}
+
+
+# ----------------------------------------------------------------------------------- running
+def control_context() -> dict:
+    """The controller and simulator limits every variant runs with (the nodes' defaults)."""
+    from ecahd_ros.local_refiner import PARAMETERS as REFINER
+    from sim_bridge.node import PARAMETERS as SIM
+
+    refiner = {s.name: s.default for s in REFINER}
+    sim = {s.name: s.default for s in SIM}
+    return {"control_rate_hz": refiner["control_rate"],
+            "control_period_s": 1.0 / refiner["control_rate"],
+            "max_v": refiner["max_v"], "max_w": refiner["max_w"],
+            "max_accel": refiner["max_accel"], "sim_rate_hz": sim["rate_hz"],
+            "sim_max_v": sim["max_v"], "sim_max_w": sim["max_w"],
+            "control_timeout_s": sim["control_timeout"]}
+
+
+def run_navigation_benchmark(settings: NavigationBenchSettings, out: Path, *,
+                             progress: bool = True) -> NavigationBenchResult:
+    """Run every selected variant (one ``ecahd demo`` each, into ``out/<key>``)."""
+    from tqdm import tqdm
+
+    from ecahd_core.bench.timing import machine_info
+    from ecahd_ros.demo import DemoConfig, run_demo
+
+    chosen = [v for v in VARIANTS if v.key in settings.variants]
+    base = settings.domain_id if settings.domain_id is not None else 1 + os.getpid() % 90
+    results = []
+    bar = tqdm(chosen, desc="bench navigation", unit="variant", disable=not progress)
+    for i, variant in enumerate(bar):
+        bar.set_postfix_str(variant.label)
+        log.info("variant %d/%d: %s (planner %s, refiner %s), domain %d", i + 1, len(chosen),
+                 variant.label, variant.planner_params, variant.refiner_params, base + i)
+        config = DemoConfig(out=out / variant.key, episodes=settings.episodes,
+                            robot=settings.robot, map=settings.map, seed=settings.seed,
+                            realtime_factor=settings.realtime_factor,
+                            max_steps=settings.max_steps, domain_id=base + i,
+                            planner_params=dict(variant.planner_params),
+                            refiner_params=dict(variant.refiner_params))
+        t0 = time.monotonic()
+        demo = run_demo(config)
+        wall = time.monotonic() - t0
+        ev = demo.evaluation
+        results.append(VariantResult(
+            key=variant.key, label=variant.label, summary=ev.summary.to_dict(),
+            episodes=[m.to_dict() for m in ev.metrics],
+            goal_to_plan_ms=list(demo.goal_to_plan_ms), wall_s=wall,
+            episodes_wall_s=demo.wall_s, sim_s=demo.sim_s, out=str(config.out)))
+        s = ev.summary
+        log.info("%s: %.1f s wall (episodes %.1f s); reward %.1f, reached %d/%d, collision "
+                 "%.3f%%, inference %.3f s/episode", variant.label, wall, demo.wall_s,
+                 s.episode_reward, round(s.reached * s.episodes), s.episodes, s.collision_rate,
+                 s.inference_time_s)
+    context = {**control_context(), "machine": machine_info(),
+               "realtime_factor": settings.realtime_factor, "max_steps": settings.max_steps}
+    return NavigationBenchResult(settings=settings, variants=results, context=context)
+
+
+# ---------------------------------------------------------------------------------- tables
+def _fmt(value, digits: int) -> str:
+    return "-" if value is None else f"{value:.{digits}f}"
+
+
+def _pair(a, b, digits: int) -> str:
+    return "-" if a is None and b is None else f"{_fmt(a, digits)} / {_fmt(b, digits)}"
+
+
+def _latency(values: list) -> tuple[float | None, float | None]:
+    """(p50, max) [ms] of the goal -> plan latencies that were measured."""
+    import numpy as np
+
+    ms = [v for v in values if v is not None]
+    return (float(np.percentile(ms, 50)), float(max(ms))) if ms else (None, None)
+
+
+def format_table(result: NavigationBenchResult) -> str:
+    """Rows = metrics; columns = our variants, then the paper's Table III."""
+    from ecahd_core.evaluation import PAPER_TABLE_III
+
+    ours, paper = result.variants, list(PAPER_TABLE_III.items())
+    head = ["Metric"] + [f"**{v.label}**" for v in ours] + [f"{k} (paper)" for k, _ in paper]
+    rows = []
+
+    def row(name: str, cells: list[str], paper_cells: list[str] | None = None) -> None:
+        rows.append([name] + cells + (paper_cells or ["-"] * len(paper)))
+
+    row("Episode Reward ↑", [_fmt(v.summary["episode_reward"], 3) for v in ours],
+        [f"{r.episode_reward:.3f}" for _, r in paper])
+    row("First Reach [steps] ↓", [_fmt(v.summary["first_reach"], 3) for v in ours],
+        [f"{r.first_reach:.3f}" for _, r in paper])
+    row("Collision Rate [% of sim steps in contact] ↓",
+        [_fmt(v.summary["collision_rate"], 4) for v in ours],
+        [f"{r.collision_rate:.4f}" for _, r in paper])
+    row("Collision, exact checker [% of driven poses in a wall]",
+        [_fmt(v.exact_penetration, 3) for v in ours])
+    row("Collision-free episodes, exact checker [%]",
+        [_fmt(None if v.summary["path_collision_free"] is None
+              else 100 * v.summary["path_collision_free"], 0) for v in ours])
+    row("Inference Time [s / episode] ↓", [_fmt(v.summary["inference_time_s"], 3) for v in ours],
+        [f"{r.inference_time_s:.3f}" for _, r in paper])
+    row("Reached episodes", [f"{round(v.summary['reached'] * v.summary['episodes'])} / "
+                             f"{v.summary['episodes']}" for v in ours])
+    row("Control callback p50 / p99 [ms]",
+        [_pair(v.summary.get("control_ms_p50"), v.summary.get("control_ms_p99"), 2)
+         for v in ours])
+    row("Goal -> first plan p50 / max [ms]",
+        [_pair(*_latency(v.goal_to_plan_ms), 1) for v in ours])
+    row("Wall time: run / episodes [s]", [f"{v.wall_s:.1f} / {v.episodes_wall_s:.1f}"
+                                          for v in ours])
+    lines = ["| " + " | ".join(head) + " |",
+             "|---|" + "---:|" * (len(head) - 1)]
+    lines += ["| " + " | ".join(r) + " |" for r in rows]
+    return "\n".join(lines) + "\n"
+
+
+def format_markdown(result: NavigationBenchResult) -> str:
+    """The table with the settings, limits and machine it was measured with."""
+    s, c = result.settings, result.context
+    m = c.get("machine", {})
+    return (
+        f"Closed loop on {s.map}, robot {s.robot}, {s.episodes} seeded episodes (seed "
+        f"{s.seed}), the same goals for every variant; sim_bridge at {c['sim_rate_hz']:g} "
+        f"steps per sim second, realtime factor {s.realtime_factor:g}; local_refiner control "
+        f"every {c['control_period_s']:g} s of sim time ({c['control_rate_hz']:g} Hz), "
+        f"|v| <= {c['max_v']:g} m/s, |w| <= {c['max_w']:g} rad/s, |dv/dt| <= "
+        f"{c['max_accel']:g} m/s²; sim_bridge stops the robot {c['control_timeout_s']:g} s "
+        f"after the last cmd_vel. An episode ends once the goal is held for 10 control steps or "
+        f"after {s.max_steps} steps (the paper counts reward over all 800). Inference time: "
+        f"the planning records (SD / FD / A*, J checks, DD), not the control ticks. Machine: "
+        f"{m.get('cpu', '?')}, {m.get('logical_cpus', '?')} logical CPUs, torch "
+        f"{m.get('torch', '?')} with {m.get('torch_threads', '?')} thread(s) per process, "
+        f"Python {m.get('python', '?')}.\n\n" + format_table(result))
+
+
+def command_line(settings: NavigationBenchSettings) -> str:
+    """The ``ecahd bench navigation`` command that reproduces ``settings``."""
+    d = NavigationBenchSettings()
+    argv = ["ecahd", "bench", "navigation", "--episodes", str(settings.episodes), "--seed",
+            str(settings.seed), "--robot", settings.robot, "--map", settings.map]
+    if tuple(settings.variants) != d.variants:
+        argv += ["--variants", *settings.variants]
+    if settings.realtime_factor != d.realtime_factor:
+        argv += ["--realtime-factor", f"{settings.realtime_factor:g}"]
+    if settings.max_steps != d.max_steps:
+        argv += ["--max-steps", str(settings.max_steps)]
+    return shlex.join(argv)
+
+
+def results_block(result: NavigationBenchResult) -> str:
+    """What ``--results`` puts between the markers: the command, then the markdown."""
+    return (f"`{command_line(result.settings)}` ({time.strftime('%Y-%m-%d')}):\n\n"
+            + format_markdown(result))
+
+
+def replace_block(text: str, block: str) -> str:
+    """``text`` with the lines between BEGIN and END replaced by ``block``; without both
+    markers (in that order), ``text`` with a new SECTION holding them appended."""
+    lines = text.splitlines(keepends=True)
+    stripped = [line.strip() for line in lines]
+    body = block if block.endswith("\n") else block + "\n"
+    if BEGIN in stripped and END in stripped[stripped.index(BEGIN):]:
+        i = stripped.index(BEGIN)
+        j = i + stripped[i:].index(END)
+        return "".join(lines[:i + 1]) + body + "".join(lines[j:])
+    sep = "" if not text or text.endswith("\n\n") else ("\n" if text.endswith("\n") else "\n\n")
+    return f"{text}{sep}{SECTION}\n\n{BEGIN}\n{body}{END}\n"
+
+
+def write_results(path, block: str) -> None:
+    from ecahd_core.errors import EcahdError
+
+    path = Path(path)
+    try:
+        text = path.read_text() if path.exists() else ""
+        path.write_text(replace_block(text, block))
+    except OSError as exc:
+        raise EcahdError(f"cannot update {str(path)!r}: {exc}") from exc
+
+
+# ------------------------------------------------------------------------------ interface
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    d = NavigationBenchSettings()
+    p.add_argument("--episodes", type=int, default=d.episodes, help="seeded goals per variant")
+    p.add_argument("--seed", type=int, default=d.seed, help="seed of the goals and samplers")
+    p.add_argument("--robot", default=d.robot,
+                   help="footprint: circle | quadruped | humanoid | Nav2 polygon '[[x, y], ...]'")
+    p.add_argument("--map", default=d.map, help="built-in maze with shipped models")
+    p.add_argument("--variants", nargs="+", choices=VARIANT_KEYS, default=list(d.variants),
+                   help="which columns to run (ecahd: w/ DD, ecahd-no-dd: w/o DD, astar: A* + "
+                        "controller, fd: FD without a local planner)")
+    p.add_argument("--realtime-factor", type=float, default=d.realtime_factor,
+                   help="sim seconds per wall second")
+    p.add_argument("--max-steps", type=int, default=d.max_steps, help="control steps per episode")
+    p.add_argument("--domain-id", type=int, default=None,
+                   help="ROS_DOMAIN_ID of the first variant, the others count up (None: "
+                        "from the process id)")
+    p.add_argument("--out", default=None,
+                   help="folder of the runs (None: runs/bench-navigation-<timestamp>)")
+    p.add_argument("--json", metavar="FILE", help="write every variant's results here")
+    p.add_argument("--md", metavar="FILE", help="write the markdown table here")
+    p.add_argument("--results", metavar="FILE",
+                   help=f"put the table and command into FILE between {BEGIN} and {END}")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def run(args: argparse.Namespace) -> int:
+    from ecahd_core.errors import EcahdError
+
+    if args.episodes < 1 or args.max_steps < 1:
+        raise EcahdError("bench navigation needs --episodes >= 1 and --max-steps >= 1")
+    settings = NavigationBenchSettings(
+        episodes=args.episodes, seed=args.seed, robot=args.robot, map=args.map,
+        variants=tuple(k for k in VARIANT_KEYS if k in args.variants),
+        realtime_factor=args.realtime_factor, max_steps=args.max_steps,
+        domain_id=args.domain_id)
+    out = (Path(args.out) if args.out
+           else Path("runs") / time.strftime("bench-navigation-%Y%m%d-%H%M%S"))
+    result = run_navigation_benchmark(settings, out, progress=not args.no_progress)
+    md = format_markdown(result)
+    print(md)
+    print(f"runs: {out}")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "navigation.json").write_text(json.dumps(result.to_dict(), indent=2) + "\n")
+    (out / "navigation.md").write_text(md)
+    for path, text in ((args.json, json.dumps(result.to_dict(), indent=2) + "\n"),
+                       (args.md, md)):
+        if path:
+            Path(path).parent.mkdir(parents=True, exist_ok=True)
+            Path(path).write_text(text)
+    if args.results:
+        write_results(args.results, results_block(result))
+        print(f"updated {args.results}")
+    return 0
+
+
+# ------------------------------------------------------------------- `ecahd bench` as a whole
+def benchmarks() -> dict:
+    """Every ``ecahd bench`` benchmark: the core's, then navigation."""
+    from ecahd_core.commands.bench import BENCHMARKS, Benchmark
+
+    return {**BENCHMARKS,
+            "navigation": Benchmark(help=HELP, add_arguments=add_arguments, run=run)}
+
+
+def add_bench_arguments(parser: argparse.ArgumentParser) -> None:
+    """``ecahd bench`` takes the benchmark name, then that benchmark's options."""
+    sub = parser.add_subparsers(dest="benchmark", metavar="BENCHMARK", required=True)
+    for name, bench in benchmarks().items():
+        p = sub.add_parser(name, help=bench.help, description=bench.help,
+                           formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+        bench.add_arguments(p)
+
+
+def run_bench(args: argparse.Namespace) -> int:
+    return benchmarks()[args.benchmark].run(args)
