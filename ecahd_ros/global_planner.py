@@ -28,7 +28,8 @@ Parameters (read-only, declared in :data:`PARAMETERS`):
     horizon (int, 10): P^g, waypoints of the first global plan.
     ddim_steps (int, 0): DDIM steps of SD or FD; 0 = the checkpoint's.
     epsilon (double, 1.0): [m] goal-reaching radius of the selection rule.
-    selection (str, "shortest_reaching"): shortest_reaching (paper) or collision_aware.
+    selection (str, "collision_aware"): collision_aware (J weighs the candidates, as the paper's
+        Table III runs do) or shortest_reaching (Sec. III-A's rule).
     robot (str, "circle"), footprint (str, ""), footprint_padding (double, 0.0 m): the robot.
     global_frame (str, "map"): frame of goals and plans.
     waypoint_tolerance (double, 0.3): [m] distance to the next waypoint that triggers a replan
@@ -94,7 +95,8 @@ PARAMETERS = [
     ParamSpec("horizon", 10, "P^g, waypoints of the first global plan"),
     ParamSpec("ddim_steps", 0, "DDIM steps of SD or FD; 0 = the checkpoint's"),
     ParamSpec("epsilon", 1.0, "[m] goal-reaching radius of the best-of-N rule"),
-    ParamSpec("selection", "shortest_reaching", f"best-of-N rule: {list(SELECTION_RULES)}"),
+    ParamSpec("selection", "collision_aware", f"best-of-N rule: {list(SELECTION_RULES)} "
+                                              "(shortest_reaching: Sec. III-A's)"),
     ParamSpec("robot", "circle", "footprint preset: circle, quadruped, humanoid"),
     ParamSpec("footprint", "", "Nav2 footprint polygon '[[x, y], ...]' [m]; overrides robot"),
     ParamSpec("footprint_padding", 0.0, "[m] grows the footprint (Nav2 footprint_padding)"),

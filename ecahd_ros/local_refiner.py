@@ -4,7 +4,9 @@ pure-pursuit style controller that follows the result.
 For the current segment of the global plan (the robot's pose -> the plan's next waypoint) it
 builds the straight local plan LocalPlan of P^l points, evaluates the collision cost c^l of J
 (surface sweep of the footprint) and, when c^l > c_th, replaces it by a Dense Diffusion sample
-guided by J (``HierarchicalPlanner.refine``). This happens once per segment: when a plan arrives
+guided by J (``HierarchicalPlanner.refine``); if the refined plan is still above c_th, its two
+interior points are polished by descending J (``polish_steps``, our rule beyond the paper; both
+ends stay: the robot's pose and the global planner's waypoint). This happens once per segment: when a plan arrives
 and when the robot comes within ``waypoint_tolerance`` of the waypoint it is heading for; the
 control timer only tracks the current dense local plan.
 
@@ -80,6 +82,8 @@ PARAMETERS = [
                                           "exceeds this"),
     ParamSpec("dd_enabled", True, "run Dense Diffusion at all; false: follow the straight local "
                                   "plans (ECAHD w/o DD; J still checked for the diagnostics)"),
+    ParamSpec("polish_steps", DenseConfig().polish_steps,
+              "J-descent steps on a DD local plan still above c_th (ours); 0 = the paper"),
     ParamSpec("control_rate", 10.0, "[Hz] cmd_vel rate"),
     ParamSpec("max_v", 0.5, "[m/s] limit on |linear velocity|"),
     ParamSpec("max_w", 1.5, "[rad/s] limit on |angular velocity|"),
@@ -108,6 +112,7 @@ class LocalRefinerParams:
     global_frame: str
     c_th: float
     dd_enabled: bool
+    polish_steps: int
     control_rate: float
     max_v: float
     max_w: float
@@ -125,7 +130,8 @@ class LocalRefinerParams:
         require_positive(self, "control_rate", "max_v", "max_w", "max_accel", "lookahead",
                          "waypoint_tolerance", "goal_tolerance", "stale_timeout",
                          "torch_threads")
-        require_non_negative(self, "c_th", "footprint_padding", "plan_timeout", "seed")
+        require_non_negative(self, "c_th", "footprint_padding", "plan_timeout", "seed",
+                             "polish_steps")
         require(bool(self.global_frame), "global_frame", self.global_frame, "non-empty")
 
 
@@ -228,7 +234,8 @@ class LocalRefiner(Node):
         self.planner = HierarchicalPlanner(
             None, ckpt, costmap=cost_config.make_costmap(grid),
             footprint_points=self.footprint.points, cost_config=cost_config,
-            dense=DenseConfig(points=self.points, c_th=p.c_th, enabled=p.dd_enabled))
+            dense=DenseConfig(points=self.points, c_th=p.c_th, enabled=p.dd_enabled,
+                              polish_steps=p.polish_steps))
         self.get_logger().info(f"map {grid.name!r} received; "
                                f"{'DD model and ' if p.dd_enabled else ''}cost J ready")
         if self.waypoints is not None:
@@ -319,6 +326,14 @@ class LocalRefiner(Node):
                 local[0], local[-1] = start, end
                 c_after, stage = float(cost[0]), "dd"
                 self.dd_calls += 1
+                if self.planner.polishing and c_after > p.c_th:  # ours: both ends stay
+                    fixed = torch.zeros(self.points, dtype=torch.bool)
+                    fixed[0] = fixed[-1] = True
+                    polished, cost = self.planner.polish(
+                        torch.as_tensor(local, dtype=torch.float32)[None], fixed)
+                    local = polished[0].numpy().astype(np.float64)
+                    local[0], local[-1] = start, end
+                    c_after = float(cost[0])
             ms = (time.perf_counter() - t0) * 1e3
         self.local = local
         self.local_costs = (c_before, c_after)

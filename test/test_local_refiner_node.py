@@ -31,12 +31,9 @@ CORNER_PLAN = [(1.5, 1.5), (2.5, 2.5), (2.5, 3.5)]  # cuts wall cell [1, 2] x [2
 
 
 def params(**over) -> LocalRefinerParams:
-    values = dict(dd_model="", map_name="maze2d-large", robot="circle", footprint="",
-                  footprint_padding=0.0, global_frame="map", c_th=0.1, dd_enabled=True,
-                  control_rate=10.0,
-                  max_v=0.5, max_w=1.5, max_accel=1.0, lookahead=0.4, waypoint_tolerance=0.3,
-                  goal_tolerance=0.25, stale_timeout=1.0, plan_timeout=0.0,
-                  enable_stamped_cmd_vel=False, seed=0, torch_threads=1)
+    from ecahd_ros.local_refiner import PARAMETERS
+
+    values = {spec.name: spec.default for spec in PARAMETERS}  # the declared defaults
     values.update(over)
     return LocalRefinerParams(**values)
 
