@@ -88,7 +88,8 @@ PARAMETERS = [
     ParamSpec("max_v", 0.5, "[m/s] limit on |linear velocity|"),
     ParamSpec("max_w", 1.5, "[rad/s] limit on |angular velocity|"),
     ParamSpec("max_accel", 1.0, "[m/s^2] limit on |linear acceleration|"),
-    ParamSpec("lookahead", 0.4, "[m] pure-pursuit lookahead distance"),
+    ParamSpec("lookahead", 0.25, "[m] pure-pursuit lookahead distance (0.4 cut corners: 3.7% "
+                                 "of sim steps in wall contact over 5 demo episodes, 0.25: 0%)"),
     ParamSpec("waypoint_tolerance", 0.3, "[m] reaching a waypoint this close starts the next "
                                          "segment"),
     ParamSpec("goal_tolerance", 0.25, "[m] the goal (last plan point) counts as reached"),
