@@ -236,8 +236,9 @@ def format_markdown(result: NavigationBenchResult) -> str:
     s, c = result.settings, result.context
     m = c.get("machine", {})
     return (
-        f"Closed loop on {s.map}, robot {s.robot}, {s.episodes} seeded episodes (seed "
-        f"{s.seed}), the same goals for every variant; sim_bridge at {c['sim_rate_hz']:g} "
+        f"Closed loop on {s.map}, robot {s.robot}, {s.episodes} seeded "
+        f"episode{'s' if s.episodes != 1 else ''} (seed {s.seed}), the same goals for every "
+        f"variant; sim_bridge at {c['sim_rate_hz']:g} "
         f"steps per sim second, realtime factor {s.realtime_factor:g}; local_refiner control "
         f"every {c['control_period_s']:g} s of sim time ({c['control_rate_hz']:g} Hz), "
         f"|v| <= {c['max_v']:g} m/s, |w| <= {c['max_w']:g} rad/s, |dv/dt| <= "
