@@ -363,11 +363,9 @@ def benchmarks() -> dict:
 
 def add_bench_arguments(parser: argparse.ArgumentParser) -> None:
     """``ecahd bench`` takes the benchmark name, then that benchmark's options."""
-    sub = parser.add_subparsers(dest="benchmark", metavar="BENCHMARK", required=True)
-    for name, bench in benchmarks().items():
-        p = sub.add_parser(name, help=bench.help, description=bench.help,
-                           formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-        bench.add_arguments(p)
+    from ecahd_core.commands.bench import add_arguments as add_core_bench_arguments
+
+    add_core_bench_arguments(parser, benchmarks())
 
 
 def run_bench(args: argparse.Namespace) -> int:

@@ -6,9 +6,11 @@ builds the straight local plan LocalPlan of P^l points, evaluates the collision 
 (surface sweep of the footprint) and, when c^l > c_th, replaces it by a Dense Diffusion sample
 guided by J (``HierarchicalPlanner.refine``); if the refined plan is still above c_th, its two
 interior points are polished by descending J (``polish_steps``, our rule beyond the paper; both
-ends stay: the robot's pose and the global planner's waypoint). This happens once per segment: when a plan arrives
-and when the robot comes within ``waypoint_tolerance`` of the waypoint it is heading for; the
-control timer only tracks the current dense local plan.
+ends stay: the robot's pose and the global planner's waypoint). This happens once per segment,
+inside the control tick: the first tick after a plan (or a map) arrives, and the tick in which
+the robot comes within ``waypoint_tolerance`` of the waypoint it is heading for; every other
+tick only tracks the current dense local plan. So the "control" timing records (the whole tick)
+include every J check and DD run, and the plan and map callbacks stay cheap.
 
 With ``dd_enabled`` false ("ECAHD w/o DD" of Table III, and the baselines' "no local planner")
 the straight local plans are followed as they are: J is still evaluated on each one (so the
@@ -239,8 +241,7 @@ class LocalRefiner(Node):
                               polish_steps=p.polish_steps))
         self.get_logger().info(f"map {grid.name!r} received; "
                                f"{'DD model and ' if p.dd_enabled else ''}cost J ready")
-        if self.waypoints is not None:
-            self._start_segment()
+        self.local = None  # the next control tick checks (and refines) the segment on this map
 
     def _on_plan(self, msg: Path) -> None:
         p = self.params
@@ -258,7 +259,7 @@ class LocalRefiner(Node):
         self.waypoints = xy if len(xy) > 1 else np.concatenate([xy, xy])
         self.plan_time = self.get_clock().now()
         self.target = 1
-        self._start_segment()
+        self.local = None  # the next control tick checks (and refines) the first segment
 
     def _on_odom(self, msg: Odometry) -> None:
         if msg.header.frame_id and msg.header.frame_id != self.params.global_frame:
@@ -283,6 +284,8 @@ class LocalRefiner(Node):
 
     def _on_control(self) -> None:
         p = self.params
+        if self.waypoints is not None and self.local is None and self.pose is not None:
+            self._start_segment()  # a new plan or map: every J check and DD runs in a tick
         if self.waypoints is None or self.local is None or self.pose is None:
             return self._stop()
         now = self.get_clock().now()

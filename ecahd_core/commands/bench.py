@@ -248,10 +248,12 @@ BENCHMARKS: dict[str, Benchmark] = {
 
 
 # ----------------------------------------------------------------------------- interface
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """``ecahd bench`` takes the benchmark name, then that benchmark's options."""
+def add_arguments(parser: argparse.ArgumentParser,
+                  benchmarks: dict[str, Benchmark] | None = None) -> None:
+    """``ecahd bench`` takes the benchmark name, then that benchmark's options (``benchmarks``:
+    the table to offer, default :data:`BENCHMARKS`)."""
     sub = parser.add_subparsers(dest="benchmark", metavar="BENCHMARK", required=True)
-    for name, bench in BENCHMARKS.items():
+    for name, bench in (benchmarks or BENCHMARKS).items():
         p = sub.add_parser(name, help=bench.help, description=bench.help,
                            formatter_class=argparse.ArgumentDefaultsHelpFormatter)
         bench.add_arguments(p)
