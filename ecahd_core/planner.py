@@ -204,6 +204,9 @@ class DenseConfig:
             up to this many steps (ecahd_core.polish; the start and the final goal stay fixed,
             an intermediate waypoint may move). 0 is the paper's behaviour.
         polish_step_size: [m] the largest point move per polishing step.
+        keep_better: our third rule, beyond the paper: when DD's plan costs more by J than the
+            straight local plan it was asked to improve (DD can overshoot), keep the straight
+            plan (polishing then starts from it). False is the paper's behaviour.
     """
 
     points: int = 4
@@ -219,6 +222,7 @@ class DenseConfig:
     guidance_space: str = "x0"
     polish_steps: int = 30
     polish_step_size: float = 0.05
+    keep_better: bool = True
 
     def __post_init__(self) -> None:
         self.polish_config()  # validates the polishing settings
@@ -374,7 +378,8 @@ class HierarchicalPlanner:
             if self.dd is not None and c > self.dense.c_th:  # line 15
                 t0 = time.perf_counter()
                 seg, cost = self.refine(a[None], b[None], generator=generator)
-                local, c_after = seg[0], float(cost[0])
+                if not (self.dense.keep_better and float(cost[0]) > c):
+                    local, c_after = seg[0], float(cost[0])
                 times["dd"] += (time.perf_counter() - t0) * 1e3
                 used = True
             moved = self.polishing and c_after > self.dense.c_th
@@ -423,6 +428,9 @@ class HierarchicalPlanner:
             t0 = time.perf_counter()
             idx = torch.nonzero(used).flatten()
             seg, cost = self.refine(a[idx], b[idx], generator=generator)
+            if self.dense.keep_better:  # ours: DD never replaces a cheaper straight plan
+                better = cost <= c[idx]
+                idx, seg, cost = idx[better], seg[better], cost[better]
             local[idx] = seg
             c_after[idx] = cost
             times["dd"] = (time.perf_counter() - t0) * 1e3

@@ -326,10 +326,13 @@ class LocalRefiner(Node):
             stage = "j_check"
             if p.dd_enabled and c_before > p.c_th:  # Algorithm 1 line 15
                 refined, cost = self.planner.refine(seg[:, 0], goal, generator=self.generator)
-                local = refined[0].numpy().astype(np.float64)
-                local[0], local[-1] = start, end
-                c_after, stage = float(cost[0]), "dd"
+                stage = "dd"
                 self.dd_calls += 1
+                # ours (DenseConfig.keep_better): DD never replaces a cheaper straight plan
+                if not (self.planner.dense.keep_better and float(cost[0]) > c_before):
+                    local = refined[0].numpy().astype(np.float64)
+                    local[0], local[-1] = start, end
+                    c_after = float(cost[0])
                 if self.planner.polishing and c_after > p.c_th:  # ours: both ends stay
                     fixed = torch.zeros(self.points, dtype=torch.bool)
                     fixed[0] = fixed[-1] = True

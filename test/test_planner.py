@@ -99,3 +99,30 @@ def test_polishing_moves_only_colliding_local_plans_and_keeps_start_and_goal(rep
         assert np.allclose(a[-1], b[0])  # still joined end to start
     # the polished path's total collision cost is below the paper's
     assert sum(c for _, c in ours.local_costs) < sum(c for _, c in paper.local_costs)
+
+
+@pytest.mark.parametrize("keep_better", [True, False])
+def test_keep_better_never_accepts_a_dd_plan_costlier_than_the_straight_one(keep_better):
+    fp = make_footprint("quadruped")
+    cc = CostConfig()
+    sd = SparseDiffusion(load_model("sd", GRID, footprint=fp), SparseConfig(num_candidates=4))
+    hd = HierarchicalPlanner(sd, load_model("dd", GRID, footprint=fp), costmap=cc.make_costmap(GRID),
+                             footprint_points=fp.points, cost_config=cc, replan="once",
+                             dense=DenseConfig(c_th=0.0, polish_steps=0, keep_better=keep_better))
+    wall = torch.tensor([4.5, 1.5])  # maze2d-large: (4.5, 1.5) is inside a wall
+
+    def worse_refine(starts, goals, **_):  # a "DD" that detours every segment through a wall
+        frac = torch.linspace(0.0, 1.0, hd.dense.points)[None, :, None]
+        segs = starts[:, None] + frac * (goals - starts)[:, None]
+        segs[:, 1:-1] = wall
+        return segs, hd.local_cost(segs, goals)
+
+    hd.refine = worse_refine
+    plan = hd.plan(np.array([1.5, 1.5]), np.array([10.5, 7.5]),
+                   generator=torch.Generator().manual_seed(0))
+    for (c_before, c_after), seg in zip(plan.local_costs, plan.segments):
+        through_wall = np.allclose(seg[1], wall.numpy())
+        if keep_better:  # the cheaper straight plan stays wherever the detour costs more
+            assert c_after <= c_before and not (through_wall and c_after > c_before)
+        elif c_before > 0.0:
+            assert through_wall  # the paper accepts DD's plan whatever it costs

@@ -71,6 +71,7 @@ class PlanningBenchSettings:
     c_th: float = 0.1
     dd_retries: int = 0
     polish_steps: int = 30  # DenseConfig's default; 0 = the paper's Algorithm 1
+    keep_better: bool = True  # DenseConfig's default; False = the paper's Algorithm 1
     replan: str = "every_waypoint"
     ablation: bool = True
 
@@ -176,7 +177,8 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                                              guidance_weight=settings.guidance_weight,
                                              guidance_space=settings.guidance_space,
                                              retries=settings.dd_retries,
-                                             polish_steps=settings.polish_steps),
+                                             polish_steps=settings.polish_steps,
+                                             keep_better=settings.keep_better),
                                          replan=settings.replan)
 
                 def plan_fn(s, g):
@@ -219,6 +221,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                "guidance_weight": settings.guidance_weight, "c_th": settings.c_th,
                "guidance_space": settings.guidance_space, "margin": settings.margin,
                "dd_retries": settings.dd_retries, "polish_steps": settings.polish_steps,
+               "keep_better": settings.keep_better,
                "replan": settings.replan,
                "torch": torch.__version__,
                "threads": torch.get_num_threads()}
@@ -244,6 +247,7 @@ def format_markdown(r: PlanningBenchResult) -> str:
              f"omega {c['guidance_weight']} ({c['guidance_space']} space), c_th {c['c_th']}, "
              f"cost-map margin {c['margin']} m, DD retries {c['dd_retries']}, "
              f"polishing steps {c.get('polish_steps', 0)}, "
+             f"keep the straight plan when DD is worse: {c.get('keep_better', False)}, "
              f"SD replanning {c['replan']}, "
              f"torch {c['torch']} with {c['threads']} thread(s). Each cell: ours / paper.", "",
              f"| metric | robot | {head} |", "|---|---|" + "---|" * len(cols)]

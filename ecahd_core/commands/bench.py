@@ -193,6 +193,9 @@ def _add_planning_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--polish-steps", type=_int_at_least(0), default=d.polish_steps,
                         help="our safety rule: descend J on local plans still above c_th "
                              "(0: paper)")
+    parser.add_argument("--no-keep-better", action="store_true",
+                        help="accept DD's plan even when J says the straight one was cheaper "
+                             "(the paper's rule; ours keeps the cheaper)")
     parser.add_argument("--replan", default=d.replan, choices=("every_waypoint", "once"),
                         help="HD: SD best-of-N at every waypoint (Algorithm 1) or once")
     parser.add_argument("--no-ablation", action="store_true", help="skip Table II")
@@ -218,7 +221,7 @@ def _run_planning(args: argparse.Namespace) -> int:
         selection=args.selection,
         guidance_weight=args.omega, guidance_space=args.guidance_space, margin=args.margin,
         c_th=args.c_th, dd_retries=args.dd_retries, polish_steps=args.polish_steps,
-        replan=args.replan,
+        keep_better=not args.no_keep_better, replan=args.replan,
         ablation=not args.no_ablation)
     result = run_planning_benchmark(settings, progress=not args.no_progress)
     md = format_markdown(result)
