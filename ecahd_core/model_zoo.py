@@ -31,29 +31,49 @@ class ModelRecipe:
     """Architecture and training budget of one model kind.
 
     Attributes:
-        d_model, n_layers, n_heads: Transformer size (Fig. 2a).
+        architecture: "transformer" (Fig. 2a; SD, DD) or "temporal_unet" (Diffuser's temporal
+            U-Net; the FD baseline), as :class:`~ecahd_core.diffusion.DenoiserConfig`.
+        d_model, n_layers, n_heads: Transformer size (transformer only).
+        unet_channels, unet_kernel_size: U-Net size (temporal_unet only).
+            A size left None takes :class:`~ecahd_core.diffusion.DenoiserConfig`'s default.
         steps, batch_size, warmup_steps: optimiser budget (AdamW lr 1e-4 as the paper).
         ema_decay: EMA of the sampling weights.
         sample_steps: DDIM steps used when sampling (recorded in the checkpoint; K = 100
             training steps).
     """
 
-    d_model: int
-    n_layers: int
-    n_heads: int = 4
+    architecture: str = "transformer"
+    d_model: int | None = None
+    n_layers: int | None = None
+    n_heads: int | None = None
+    unet_channels: tuple[int, ...] | None = None
+    unet_kernel_size: int | None = None
     steps: int
     batch_size: int
     warmup_steps: int
     ema_decay: float = 0.999
     sample_steps: int = 10
 
+    def denoiser_config(self, max_horizon: int):
+        """The :class:`~ecahd_core.diffusion.DenoiserConfig` for trajectories of up to
+        ``max_horizon`` points."""
+        from ecahd_core.diffusion import DenoiserConfig
+
+        sizes = ("d_model", "n_layers", "n_heads") if self.architecture == "transformer" \
+            else ("unet_channels", "unet_kernel_size")
+        given = {name: getattr(self, name) for name in sizes if getattr(self, name) is not None}
+        return DenoiserConfig(max_horizon=max_horizon, architecture=self.architecture, **given)
+
 
 # Sized so that all three train on a 2-core CPU in about 25 minutes (docs/RESULTS.md) and
 # sample within the latency targets of `ecahd bench sampling`.
 RECIPES: dict[str, ModelRecipe] = {
-    "sd": ModelRecipe(d_model=128, n_layers=4, steps=12000, batch_size=256, warmup_steps=500),
-    "dd": ModelRecipe(d_model=96, n_layers=2, steps=4000, batch_size=256, warmup_steps=300),
-    "fd": ModelRecipe(d_model=96, n_layers=3, steps=2500, batch_size=64, warmup_steps=250),
+    "sd": ModelRecipe(d_model=128, n_layers=4, n_heads=4, steps=12000, batch_size=256,
+                      warmup_steps=500),
+    "dd": ModelRecipe(d_model=96, n_layers=2, n_heads=4, steps=4000, batch_size=256,
+                      warmup_steps=300),
+    "fd": ModelRecipe(d_model=96, n_layers=3, n_heads=4, steps=2500, batch_size=64,
+                      warmup_steps=250),
 }
 
 

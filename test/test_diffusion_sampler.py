@@ -1,11 +1,12 @@
 """Sampling loop (inpainting, guidance, batching) and its parts: normaliser, conditioning,
-the Transformer denoiser."""
+the Transformer and temporal U-Net denoisers."""
 import pytest
 import torch
 
 from ecahd_core.diffusion.conditioning import (apply_conditioning, condition_mask,
                                                expand_conditions)
-from ecahd_core.diffusion.denoiser import DenoiserConfig, TransformerDenoiser
+from ecahd_core.diffusion.denoiser import (DenoiserConfig, TemporalUnetDenoiser,
+                                           TransformerDenoiser, build_denoiser)
 from ecahd_core.diffusion.guides import CostGuide, GuideOutput
 from ecahd_core.diffusion.normalizer import Normalizer
 from ecahd_core.diffusion.sampler import DiffusionSampler, SamplerConfig, sample
@@ -98,6 +99,80 @@ def test_denoiser_config_is_validated_and_keyword_only():
         DenoiserConfig(max_horizon=10, d_model=30, n_heads=4)
     cfg = DenoiserConfig(max_horizon=10)
     assert DenoiserConfig.from_dict(cfg.to_dict()) == cfg
+
+
+def unet_config(**kw):
+    kw = {"max_horizon": 100, "unet_channels": (8, 16, 32), "unet_kernel_size": 3, **kw}
+    return DenoiserConfig(architecture="temporal_unet", **kw)
+
+
+@pytest.mark.parametrize("horizon", [1, 2, 3, 5, 7, 100])
+def test_temporal_unet_keeps_every_horizon(horizon):
+    # 3 levels: lengths that are not a multiple of 4 are padded inside and cropped back
+    torch.manual_seed(0)
+    model = TemporalUnetDenoiser(unet_config()).eval()
+    assert model.length_multiple == 4
+    x = torch.randn(3, horizon, 2)
+    eps = model(x, torch.tensor([0, 50, 99]))
+    assert eps.shape == (3, horizon, 2) and torch.isfinite(eps).all()
+    assert torch.equal(model(x, 7), model(x, torch.full((3,), 7)))  # int t = shared t
+    with pytest.raises(ValueError, match="max_horizon"):
+        model(torch.randn(3, 101, 2), 5)
+    with pytest.raises(ValueError, match=r"\(B, P, 2\)"):
+        model(torch.randn(3, horizon, 3), 5)
+
+
+def test_temporal_unet_default_size_runs_100_points():
+    # the FD recipe's size: (32, 64, 128), k = 5 -> 1,027,490 parameters
+    torch.manual_seed(0)
+    model = build_denoiser(DenoiserConfig(max_horizon=100, architecture="temporal_unet"))
+    assert isinstance(model, TemporalUnetDenoiser)
+    assert sum(p.numel() for p in model.parameters()) == 1_027_490
+    assert model(torch.randn(2, 100, 2), torch.tensor([3, 90])).shape == (2, 100, 2)
+
+
+def test_temporal_unet_output_depends_on_time_and_both_ends():
+    # the time embedding reaches the output, and the receptive field spans 100 points: moving
+    # the goal (last point) changes eps at the first free waypoint
+    torch.manual_seed(0)
+    model = TemporalUnetDenoiser(unet_config(unet_kernel_size=5)).eval()
+    x = torch.randn(1, 100, 2)
+    assert not torch.allclose(model(x, 5), model(x, 95))
+    moved = x.clone()
+    moved[0, -1] += 1.0
+    assert not torch.allclose(model(x, 5)[0, 1], model(moved, 5)[0, 1])
+
+
+def test_build_denoiser_picks_the_architecture():
+    assert type(build_denoiser(DenoiserConfig(max_horizon=10, d_model=32, n_layers=1))) \
+        is TransformerDenoiser
+    assert type(build_denoiser(unet_config())) is TemporalUnetDenoiser
+    with pytest.raises(ValueError, match="needs architecture 'temporal_unet'"):
+        TemporalUnetDenoiser(DenoiserConfig(max_horizon=10))
+    with pytest.raises(ValueError, match="needs architecture 'transformer'"):
+        TransformerDenoiser(unet_config())
+
+
+def test_denoiser_config_architecture_fields():
+    cfg = unet_config(unet_channels=[8, 16])  # a list (as read from a checkpoint) -> tuple
+    assert cfg.unet_channels == (8, 16)
+    assert cfg.to_dict()["unet_channels"] == [8, 16]
+    assert DenoiserConfig.from_dict(cfg.to_dict()) == cfg
+    # a checkpoint written before the field existed is a Transformer
+    old = DenoiserConfig(max_horizon=10).to_dict()
+    for key in ("architecture", "unet_channels", "unet_kernel_size"):
+        del old[key]
+    assert DenoiserConfig.from_dict(old).architecture == "transformer"
+    with pytest.raises(ValueError, match="'transformer', 'temporal_unet'"):
+        DenoiserConfig(max_horizon=10, architecture="unet")
+    with pytest.raises(ValueError, match="odd"):
+        unet_config(unet_kernel_size=4)
+    with pytest.raises(ValueError, match="unet_channels"):
+        unet_config(unet_channels=())
+    with pytest.raises(ValueError, match="unet_channels"):
+        unet_config(unet_channels=(8, 0))
+    with pytest.raises(ValueError, match="only supported by the 'transformer'"):
+        unet_config(use_map_encoder=True)
 
 
 def test_denoiser_with_map_encoder_runs_forward():

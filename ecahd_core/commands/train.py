@@ -57,15 +57,14 @@ def train_one(kind: str, dataset, *, out: Path, seed: int, device: str, steps: i
               steps_scale: float = 1.0, resume: str | None = None, ship: Path | None = None,
               progress: bool = True):
     """Train one model kind on an ExpertDataset; returns the TrainResult."""
-    from ecahd_core.diffusion import DenoiserConfig, Normalizer, TrainConfig, train
+    from ecahd_core.diffusion import Normalizer, TrainConfig, train
     from ecahd_core.model_zoo import model_meta, recipe, training_arrays
 
     r = recipe(kind)
     arrays = training_arrays(kind, dataset)
     steps = steps or max(1, int(round(r.steps * steps_scale)))
     warmup = warmup if warmup is not None else int(round(r.warmup_steps * min(1.0, steps_scale)))
-    config = DenoiserConfig(max_horizon=max(arrays), d_model=r.d_model, n_layers=r.n_layers,
-                            n_heads=r.n_heads)
+    config = r.denoiser_config(max(arrays))
     tc = TrainConfig(steps=steps, batch_size=batch_size or r.batch_size, warmup_steps=warmup,
                      ema_decay=r.ema_decay, seed=seed, device=device,
                      log_every=max(1, min(100, steps // 20)))

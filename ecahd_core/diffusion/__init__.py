@@ -2,7 +2,8 @@
 
 Modules, by question:
 - ``scheduler``     the noise schedule q(x_t | x_0) and the DDIM step (Eqs. 1-2, Alg. 2 line 6)
-- ``denoiser``      the Transformer eps_theta of Fig. 2(a) (+ optional map encoder)
+- ``denoiser``      eps_theta: the Transformer of Fig. 2(a) (+ optional map encoder), the
+                    temporal U-Net of the FD baseline, ``build_denoiser``
 - ``conditioning``  inpainting of start / goal waypoints (``apply_conditioning``)
 - ``guides``        the guide interface: cost J and its gradient (Alg. 2 lines 4-5)
 - ``sampler``       the sampling loop: DDIM + guidance + inpainting (Alg. 2 lines 1-9)
@@ -11,7 +12,8 @@ Modules, by question:
 """
 from ecahd_core.diffusion.conditioning import (START_GOAL, apply_conditioning, condition_mask,
                                                expand_conditions)
-from ecahd_core.diffusion.denoiser import DenoiserConfig, TransformerDenoiser
+from ecahd_core.diffusion.denoiser import (DenoiserConfig, TemporalUnetDenoiser,
+                                           TransformerDenoiser, build_denoiser)
 from ecahd_core.diffusion.guides import CostGuide, Guide, GuideOutput
 from ecahd_core.diffusion.normalizer import Normalizer
 from ecahd_core.diffusion.sampler import (DiffusionSampler, SampleOutput, SamplerConfig,
@@ -23,7 +25,8 @@ from ecahd_core.diffusion.training import (Checkpoint, ModelKind, TrainConfig, T
 
 __all__ = [
     "START_GOAL", "apply_conditioning", "condition_mask", "expand_conditions",
-    "DenoiserConfig", "TransformerDenoiser", "CostGuide", "Guide", "GuideOutput", "Normalizer",
+    "DenoiserConfig", "TemporalUnetDenoiser", "TransformerDenoiser", "build_denoiser",
+    "CostGuide", "Guide", "GuideOutput", "Normalizer",
     "DiffusionSampler", "SampleOutput", "SamplerConfig", "sample", "DDIMScheduler",
     "DDIMStepOutput", "NoiseSchedule", "ScheduleConfig", "Checkpoint", "ModelKind",
     "TrainConfig", "TrainResult", "load_checkpoint", "train",

@@ -1,6 +1,8 @@
-"""The Transformer denoiser eps_theta(x_t, t) of Fig. 2(a), shared by the SD, DD and FD models.
+"""The denoisers eps_theta(x_t, t): the Transformer of Fig. 2(a) (SD and DD) and a temporal
+1D-convolution U-Net (the Diffuser-style FD baseline). :func:`build_denoiser` makes either from a
+:class:`DenoiserConfig` (``architecture``); every checkpoint stores that config.
 
-Tokens (B, 1 [+1] + P, d_model):
+Transformer tokens (B, 1 [+1] + P, d_model):
     [cond]      sinusoidal(t) -> MLP, plus a learned embedding of the horizon length P. The
                 diffusion step is given as its own token rather than added to every waypoint so
                 the waypoint tokens keep a clean "position + state" content and attention decides
@@ -21,6 +23,16 @@ the paper's "noise-prediction objective" (Sec. III-B, training).
 
 One model serves every horizon 2..max_horizon (SD's shrinking horizon): the horizon embedding
 tells the network how long the trajectory is, the position embedding where each waypoint sits.
+
+Temporal U-Net (:class:`TemporalUnetDenoiser`; jannerm/diffuser ``models/temporal.py``
+``TemporalUnet``, scaled for a CPU): the trajectory is a (B, 2, P) signal. Each level has two
+residual blocks (Conv1d k -> GroupNorm -> Mish, twice, with the time embedding added after the
+first conv) and halves P with a stride-2 conv; the way up doubles P with a transposed conv and
+concatenates the skip of the same level. Time: sinusoidal(t) -> Linear -> Mish -> Linear, added
+(after Mish -> Linear) in every block. Convolutions are local, so neighbouring waypoints are
+smooth from the start of training; the receptive field of the default (32, 64, 128), k = 5
+spans more than 100 waypoints, so the goal reaches the start. P is padded at the end (edge
+value) to a multiple of 2^(levels - 1) and cropped back. Outputs eps, as the Transformer.
 """
 from __future__ import annotations
 
@@ -39,34 +51,51 @@ class Denoiser(Protocol):
     def __call__(self, x: Tensor, t: Tensor, **kwargs: Any) -> Tensor: ...
 
 
+ARCHITECTURES = ("transformer", "temporal_unet")
+
+
 @dataclass(frozen=True, kw_only=True)
 class DenoiserConfig:
-    """Architecture of :class:`TransformerDenoiser` (stored in every checkpoint).
+    """Architecture of a denoiser (stored in every checkpoint; :func:`build_denoiser`).
+
+    A checkpoint written before ``architecture`` existed has none of the U-Net fields and loads
+    as the Transformer it is.
 
     Attributes:
         max_horizon: the longest trajectory P the model accepts (size of the position table).
-        d_model: token width.
-        n_layers: Transformer encoder layers.
-        n_heads: attention heads (must divide d_model).
-        ff_mult: feed-forward width = ff_mult * d_model.
-        dropout: dropout inside the encoder layers (training only).
-        use_map_encoder: add a map token from a (B, 1, H, W) occupancy image.
+        architecture: "transformer" (:class:`TransformerDenoiser`) or "temporal_unet"
+            (:class:`TemporalUnetDenoiser`).
+        d_model: token width (transformer).
+        n_layers: Transformer encoder layers (transformer).
+        n_heads: attention heads, must divide d_model (transformer).
+        ff_mult: feed-forward width = ff_mult * d_model (transformer).
+        dropout: dropout inside the encoder layers, training only (transformer).
+        use_map_encoder: add a map token from a (B, 1, H, W) occupancy image (transformer).
+        unet_channels: channels of each U-Net level, finest first; P is halved between levels
+            (temporal_unet). The first is also the time-embedding width.
+        unet_kernel_size: odd temporal kernel of the U-Net convolutions (temporal_unet).
     """
 
     max_horizon: int
+    architecture: str = "transformer"
     d_model: int = 128
     n_layers: int = 4
     n_heads: int = 4
     ff_mult: int = 4
     dropout: float = 0.0
     use_map_encoder: bool = False
+    unet_channels: tuple[int, ...] = (32, 64, 128)
+    unet_kernel_size: int = 5
 
     def __post_init__(self) -> None:
-        for name in ("max_horizon", "d_model", "n_layers", "n_heads", "ff_mult"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or int(value) != value or value < 1:
-                raise ValueError(f"DenoiserConfig.{name} must be a positive integer, got {value!r}")
-            object.__setattr__(self, name, int(value))
+        if self.architecture not in ARCHITECTURES:
+            allowed = ", ".join(repr(a) for a in ARCHITECTURES)
+            raise ValueError(f"DenoiserConfig.architecture must be one of {allowed}, "
+                             f"got {self.architecture!r}")
+        for name in ("max_horizon", "d_model", "n_layers", "n_heads", "ff_mult",
+                     "unet_kernel_size"):
+            object.__setattr__(self, name, _positive_int(f"DenoiserConfig.{name}",
+                                                         getattr(self, name)))
         if self.max_horizon < 2:
             raise ValueError(f"DenoiserConfig.max_horizon must be >= 2, got {self.max_horizon}")
         if self.d_model % self.n_heads:
@@ -74,13 +103,32 @@ class DenoiserConfig:
                              f"n_heads ({self.n_heads})")
         if not 0.0 <= self.dropout < 1.0:
             raise ValueError(f"DenoiserConfig.dropout must be in [0, 1), got {self.dropout}")
+        if isinstance(self.unet_channels, (str, bytes)) or not len(self.unet_channels):
+            raise ValueError(f"DenoiserConfig.unet_channels must be a non-empty sequence of "
+                             f"positive integers, got {self.unet_channels!r}")
+        object.__setattr__(self, "unet_channels", tuple(
+            _positive_int("DenoiserConfig.unet_channels", c) for c in self.unet_channels))
+        if self.unet_kernel_size % 2 == 0:
+            raise ValueError(f"DenoiserConfig.unet_kernel_size must be odd, "
+                             f"got {self.unet_kernel_size}")
+        if self.architecture == "temporal_unet" and self.use_map_encoder:
+            raise ValueError("DenoiserConfig.use_map_encoder is only supported by the "
+                             "'transformer' architecture")
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        d = asdict(self)
+        d["unet_channels"] = list(self.unet_channels)
+        return d
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "DenoiserConfig":
         return cls(**d)
+
+
+def _positive_int(name: str, value: Any) -> int:
+    if isinstance(value, bool) or int(value) != value or value < 1:
+        raise ValueError(f"{name} must be a positive integer, got {value!r}")
+    return int(value)
 
 
 def sinusoidal_embedding(t: Tensor, dim: int, *, max_period: float = 10_000.0) -> Tensor:
@@ -144,6 +192,9 @@ class TransformerDenoiser(nn.Module):
 
     def __init__(self, config: DenoiserConfig) -> None:
         super().__init__()
+        if config.architecture != "transformer":
+            raise ValueError(f"TransformerDenoiser needs architecture 'transformer', "
+                             f"got {config.architecture!r}")
         self.config = config
         d = config.d_model
         self.point_embed = nn.Linear(2, d)
@@ -183,17 +234,8 @@ class TransformerDenoiser(nn.Module):
         Returns:
             eps: (B, P, 2).
         """
-        if x.dim() != 3 or x.shape[-1] != 2:
-            raise ValueError(f"x must have shape (B, P, 2), got {tuple(x.shape)}")
+        t = _check_inputs(x, t, self.config.max_horizon)
         B, P, _ = x.shape
-        if not 1 <= P <= self.config.max_horizon:
-            raise ValueError(f"horizon {P} is outside 1..max_horizon={self.config.max_horizon}")
-        t = torch.as_tensor(t, device=x.device)
-        if t.dim() == 0:
-            t = t.expand(B)
-        if t.shape != (B,):
-            raise ValueError(f"t must be an int or have shape ({B},), got {tuple(t.shape)}")
-
         tokens = self.point_embed(x) + self.pos_embed[:, :P]  # (B, P, d)
         horizon = torch.full((B,), P, dtype=torch.long, device=x.device)
         cond = self.time_mlp(sinusoidal_embedding(t, self.config.d_model)) \
@@ -211,6 +253,122 @@ class TransformerDenoiser(nn.Module):
         h = torch.cat(prefix + [tokens], dim=1)  # (B, prefix + P, d)
         h = self.encoder(h)
         return self.head(h[:, -P:])  # (B, P, 2)
+
+
+def _check_inputs(x: Tensor, t: Tensor | int, max_horizon: int) -> Tensor:
+    """Validate x (B, P, 2) and return t as (B,) on x's device."""
+    if x.dim() != 3 or x.shape[-1] != 2:
+        raise ValueError(f"x must have shape (B, P, 2), got {tuple(x.shape)}")
+    B, P, _ = x.shape
+    if not 1 <= P <= max_horizon:
+        raise ValueError(f"horizon {P} is outside 1..max_horizon={max_horizon}")
+    t = torch.as_tensor(t, device=x.device)
+    if t.dim() == 0:
+        t = t.expand(B)
+    if t.shape != (B,):
+        raise ValueError(f"t must be an int or have shape ({B},), got {tuple(t.shape)}")
+    return t
+
+
+class _Conv1dBlock(nn.Sequential):
+    """Conv1d (same length) -> GroupNorm -> Mish: (B, c_in, L) -> (B, c_out, L)."""
+
+    def __init__(self, c_in: int, c_out: int, kernel_size: int) -> None:
+        super().__init__(nn.Conv1d(c_in, c_out, kernel_size, padding=kernel_size // 2),
+                         nn.GroupNorm(math.gcd(8, c_out), c_out), nn.Mish())
+
+
+class _ResidualTemporalBlock(nn.Module):
+    """Diffuser's ``ResidualTemporalBlock``: two conv blocks, the time embedding added between
+    them, and a 1x1-conv residual. (B, c_in, L), (B, time_dim) -> (B, c_out, L)."""
+
+    def __init__(self, c_in: int, c_out: int, time_dim: int, kernel_size: int) -> None:
+        super().__init__()
+        self.block1 = _Conv1dBlock(c_in, c_out, kernel_size)
+        self.block2 = _Conv1dBlock(c_out, c_out, kernel_size)
+        self.time_proj = nn.Sequential(nn.Mish(), nn.Linear(time_dim, c_out))
+        self.skip = nn.Conv1d(c_in, c_out, 1) if c_in != c_out else nn.Identity()
+
+    def forward(self, x: Tensor, temb: Tensor) -> Tensor:
+        h = self.block1(x) + self.time_proj(temb)[:, :, None]  # (B, c_out, L)
+        return self.block2(h) + self.skip(x)
+
+
+class TemporalUnetDenoiser(nn.Module):
+    """eps_theta(x_t, t) as a temporal 1D-convolution U-Net (Diffuser's ``TemporalUnet``):
+    (B, P, 2) normalised noisy trajectory + (B,) timesteps -> (B, P, 2) predicted noise. See the
+    module docstring for the layout."""
+
+    def __init__(self, config: DenoiserConfig) -> None:
+        super().__init__()
+        if config.architecture != "temporal_unet":
+            raise ValueError(f"TemporalUnetDenoiser needs architecture 'temporal_unet', "
+                             f"got {config.architecture!r}")
+        self.config = config
+        channels, k = config.unet_channels, config.unet_kernel_size
+        time_dim = channels[0]
+        self.time_mlp = nn.Sequential(nn.Linear(time_dim, 4 * time_dim), nn.Mish(),
+                                      nn.Linear(4 * time_dim, time_dim))
+        self.downs = nn.ModuleList()
+        c_prev = 2
+        for i, c in enumerate(channels):
+            last = i == len(channels) - 1
+            self.downs.append(nn.ModuleList([
+                _ResidualTemporalBlock(c_prev, c, time_dim, k),
+                _ResidualTemporalBlock(c, c, time_dim, k),
+                nn.Identity() if last else nn.Conv1d(c, c, 3, stride=2, padding=1)]))
+            c_prev = c
+        self.mid = nn.ModuleList([_ResidualTemporalBlock(c_prev, c_prev, time_dim, k),
+                                  _ResidualTemporalBlock(c_prev, c_prev, time_dim, k)])
+        self.ups = nn.ModuleList()
+        for c in reversed(channels[:-1]):
+            self.ups.append(nn.ModuleList([
+                nn.ConvTranspose1d(c_prev, c_prev, 4, stride=2, padding=1),
+                _ResidualTemporalBlock(c_prev + c, c, time_dim, k),
+                _ResidualTemporalBlock(c, c, time_dim, k)]))
+            c_prev = c
+        self.final = nn.Sequential(_Conv1dBlock(c_prev, c_prev, k), nn.Conv1d(c_prev, 2, 1))
+
+    @property
+    def length_multiple(self) -> int:
+        """The U-Net runs on lengths that are a multiple of this (2^(levels - 1))."""
+        return 2 ** (len(self.config.unet_channels) - 1)
+
+    def forward(self, x: Tensor, t: Tensor | int) -> Tensor:
+        """Predict the noise.
+
+        Args:
+            x: (B, P, 2) noisy normalised trajectories, 1 <= P <= max_horizon.
+            t: (B,) long timesteps in 0..K-1 (or an int shared by the batch).
+        Returns:
+            eps: (B, P, 2).
+        """
+        t = _check_inputs(x, t, self.config.max_horizon)
+        B, P, _ = x.shape
+        temb = self.time_mlp(sinusoidal_embedding(t, self.config.unet_channels[0]))  # (B, T)
+        pad = -P % self.length_multiple
+        h = x.transpose(1, 2)  # (B, 2, P)
+        if pad:
+            h = nn.functional.pad(h, (0, pad), mode="replicate")  # (B, 2, L), L = P + pad
+        skips = []
+        for block1, block2, down in self.downs:
+            h = block2(block1(h, temb), temb)
+            skips.append(h)  # (B, c_i, L / 2^i)
+            h = down(h)
+        for block in self.mid:
+            h = block(h, temb)
+        skips.pop()  # the deepest level feeds the middle directly
+        for up, block1, block2 in self.ups:
+            h = torch.cat([up(h), skips.pop()], dim=1)  # (B, c_{i+1} + c_i, L / 2^i)
+            h = block2(block1(h, temb), temb)
+        return self.final(h)[:, :, :P].transpose(1, 2)  # (B, P, 2)
+
+
+def build_denoiser(config: DenoiserConfig) -> nn.Module:
+    """The denoiser ``config.architecture`` names, freshly initialised (torch's global RNG)."""
+    if config.architecture == "temporal_unet":
+        return TemporalUnetDenoiser(config)
+    return TransformerDenoiser(config)
 
 
 def count_parameters(model: nn.Module) -> int:

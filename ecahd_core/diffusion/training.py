@@ -53,7 +53,7 @@ from torch.nn.parallel import DistributedDataParallel
 from tqdm import tqdm
 
 from ecahd_core.diffusion.conditioning import START_GOAL, apply_conditioning, condition_mask
-from ecahd_core.diffusion.denoiser import DenoiserConfig, TransformerDenoiser
+from ecahd_core.diffusion.denoiser import DenoiserConfig, build_denoiser
 from ecahd_core.diffusion.normalizer import Normalizer
 from ecahd_core.diffusion.scheduler import DDIMScheduler, NoiseSchedule, ScheduleConfig
 from ecahd_core.errors import CheckpointError, DatasetError
@@ -275,9 +275,10 @@ class Checkpoint:
             raise CheckpointError(f"{where} does not match: " + "; ".join(problems))
 
     # ------------------------------------------------------------------------------ models
-    def build_model(self, *, device: torch.device | str = "cpu") -> TransformerDenoiser:
-        """The EMA denoiser, in eval mode, with no parameter requiring gradients."""
-        model = TransformerDenoiser(self.model_config)
+    def build_model(self, *, device: torch.device | str = "cpu") -> nn.Module:
+        """The EMA denoiser of the checkpoint's architecture, in eval mode, with no parameter
+        requiring gradients."""
+        model = build_denoiser(self.model_config)
         try:
             model.load_state_dict(self.ema_state_dict)
         except RuntimeError as exc:
@@ -346,7 +347,7 @@ class TrainResult:
     path: Path
     step: int
     loss_history: tuple[tuple[int, float], ...]
-    ema_model: TransformerDenoiser
+    ema_model: nn.Module
     checkpoint: Checkpoint | None
 
 
@@ -480,7 +481,7 @@ def _train(model_config: DenoiserConfig, arrays: Mapping[int, Any], normalizer: 
 
     with torch.random.fork_rng(devices=[]):  # seeded initial weights; caller's RNG untouched
         torch.manual_seed(cfg.seed)
-        model = TransformerDenoiser(model_config).to(device)
+        model = build_denoiser(model_config).to(device)
     ema = copy.deepcopy(model).eval().requires_grad_(False)
     schedule = NoiseSchedule(cfg.schedule).to(device)
     K = schedule.num_train_timesteps
