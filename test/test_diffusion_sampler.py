@@ -5,8 +5,9 @@ import torch
 
 from ecahd_core.diffusion.conditioning import (apply_conditioning, condition_mask,
                                                expand_conditions)
-from ecahd_core.diffusion.denoiser import (DenoiserConfig, TemporalUnetDenoiser,
-                                           TransformerDenoiser, build_denoiser)
+from ecahd_core.diffusion.denoiser import (DenoiserConfig, EpsilonFromSample,
+                                           TemporalUnetDenoiser, TransformerDenoiser,
+                                           as_noise_predictor, build_denoiser)
 from ecahd_core.diffusion.guides import CostGuide, GuideOutput
 from ecahd_core.diffusion.normalizer import Normalizer
 from ecahd_core.diffusion.sampler import DiffusionSampler, SamplerConfig, sample
@@ -160,11 +161,14 @@ def test_denoiser_config_architecture_fields():
     assert DenoiserConfig.from_dict(cfg.to_dict()) == cfg
     # a checkpoint written before the field existed is a Transformer
     old = DenoiserConfig(max_horizon=10).to_dict()
-    for key in ("architecture", "unet_channels", "unet_kernel_size"):
+    for key in ("architecture", "unet_channels", "unet_kernel_size", "prediction"):
         del old[key]
-    assert DenoiserConfig.from_dict(old).architecture == "transformer"
+    assert DenoiserConfig.from_dict(old) == DenoiserConfig(max_horizon=10)
+    assert DenoiserConfig.from_dict(old).prediction == "epsilon"
     with pytest.raises(ValueError, match="'transformer', 'temporal_unet'"):
         DenoiserConfig(max_horizon=10, architecture="unet")
+    with pytest.raises(ValueError, match="'epsilon', 'sample'"):
+        DenoiserConfig(max_horizon=10, prediction="x0")
     with pytest.raises(ValueError, match="odd"):
         unet_config(unet_kernel_size=4)
     with pytest.raises(ValueError, match="unet_channels"):
@@ -173,6 +177,40 @@ def test_denoiser_config_architecture_fields():
         unet_config(unet_channels=(8, 0))
     with pytest.raises(ValueError, match="only supported by the 'transformer'"):
         unet_config(use_map_encoder=True)
+
+
+class FixedSample(torch.nn.Module):
+    """A 'sample'-predicting network that always answers x0 (B, P, 2)."""
+
+    def __init__(self, x0):
+        super().__init__()
+        self.x0 = x0
+        self.scale = torch.nn.Parameter(torch.ones(()))  # a parameter, for the device
+        self.config = DenoiserConfig(max_horizon=x0.shape[1], prediction="sample")
+
+    def forward(self, x, t):
+        return self.x0 * self.scale
+
+
+@pytest.mark.parametrize("t", [0, 9, 50, 99])
+def test_epsilon_from_sample_is_inverted_by_the_ddim_step(t):
+    # eps = (x_t - sqrt(a) x0_hat) / sqrt(1 - a); DDIM's pred_x0 recovers x0_hat
+    scheduler = DDIMScheduler(clip_sample=None)
+    scheduler.set_timesteps(100)
+    x0 = torch.rand(2, 7, 2) - 0.5
+    model = as_noise_predictor(FixedSample(x0), scheduler.alphas_cumprod)
+    assert isinstance(model, EpsilonFromSample) and model.config.prediction == "sample"
+    x = torch.randn(2, 7, 2)
+    eps = model(x, t)
+    a = scheduler.alphas_cumprod[t]
+    torch.testing.assert_close(eps, (x - a.sqrt() * x0) / (1 - a).sqrt())
+    pred_x0 = scheduler.step(eps, t, x).pred_x0
+    # float32 rounding of x is amplified by 1 / sqrt(alpha_bar): ~2000 at t = 99 (measured
+    # error there 1.7e-4), ~1 elsewhere
+    torch.testing.assert_close(pred_x0, x0, atol=1e-3 if t == 99 else 2e-5, rtol=0)
+    # an eps network is returned as it is
+    eps_net = tiny_model()
+    assert as_noise_predictor(eps_net, scheduler.alphas_cumprod) is eps_net
 
 
 def test_denoiser_with_map_encoder_runs_forward():

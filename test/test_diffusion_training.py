@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 import torch
 
-from ecahd_core.diffusion.denoiser import (DenoiserConfig, TemporalUnetDenoiser,
-                                           TransformerDenoiser, build_denoiser,
-                                           count_parameters)
+from ecahd_core.diffusion.denoiser import (DenoiserConfig, EpsilonFromSample,
+                                           TemporalUnetDenoiser, TransformerDenoiser,
+                                           build_denoiser, count_parameters)
 from ecahd_core.diffusion.normalizer import Normalizer
 from ecahd_core.diffusion.sampler import sample
 from ecahd_core.diffusion.scheduler import DDIMScheduler, ScheduleConfig
@@ -118,23 +118,29 @@ def test_checkpoint_round_trip_gives_identical_samples(toy, tmp_path):
     assert torch.equal(ref.trajectories, got.trajectories)
 
 
-def test_temporal_unet_checkpoint_round_trip(tmp_path):
-    # FD's architecture: trained a few steps, written, read back as the same U-Net
+@pytest.mark.parametrize("prediction", ["epsilon", "sample"])
+def test_temporal_unet_checkpoint_round_trip(tmp_path, prediction):
+    # FD's architecture: trained a few steps, written, read back as the same U-Net; an
+    # x_0-predicting one is sampled through EpsilonFromSample
     cfg = DenoiserConfig(max_horizon=10, architecture="temporal_unet", unet_channels=(8, 16),
-                         unet_kernel_size=3)
+                         unet_kernel_size=3, prediction=prediction)
     result = train(cfg, toy_arrays(n=32, horizons=(10,)), NORMALIZER,
                    TrainConfig(steps=4, batch_size=8, warmup_steps=1, log_every=2, seed=0),
                    kind="fd", out_path=tmp_path / "fd.pt", meta=META, progress=False)
-    assert isinstance(result.ema_model, TemporalUnetDenoiser)
+    wrapper = EpsilonFromSample if prediction == "sample" else TemporalUnetDenoiser
+    assert type(result.ema_model) is wrapper
     raw = torch.load(result.path, weights_only=True)
     assert raw["model_config"]["architecture"] == "temporal_unet"
     assert raw["model_config"]["unet_channels"] == [8, 16]
+    assert raw["model_config"]["prediction"] == prediction
+    assert not any(k.startswith("model.") for k in raw["ema_state_dict"])  # the bare network
     light = load_checkpoint(result.path).save(tmp_path / "fd_infer.pt",
                                               include_training_state=False)
     ckpt = load_checkpoint(light, expect={"kind": "fd"})
     assert ckpt.model_config == cfg
     model = ckpt.build_model()
-    assert isinstance(model, TemporalUnetDenoiser) and not model.training
+    assert type(model) is wrapper and not model.training
+    assert not any(p.requires_grad for p in model.parameters())
 
     start, goal = toy_problems(4)
     kw = dict(batch=4, horizon=10, conditions={0: start, -1: goal}, num_steps=5, eta=1.0)
@@ -148,7 +154,7 @@ def test_temporal_unet_checkpoint_round_trip(tmp_path):
 def test_checkpoint_without_architecture_loads_as_transformer(toy, tmp_path):
     # checkpoints written before DenoiserConfig.architecture existed (the shipped SD and DD)
     payload = torch.load(toy.path, weights_only=True)
-    for key in ("architecture", "unet_channels", "unet_kernel_size"):
+    for key in ("architecture", "unet_channels", "unet_kernel_size", "prediction"):
         del payload["model_config"][key]
     old = tmp_path / "old.pt"
     torch.save(payload, old)
@@ -288,7 +294,7 @@ def test_default_models_fit_the_size_budget(tmp_path):
                           horizons=(horizon,), ema_state_dict=model.state_dict(), step=0,
                           meta={}, train_config={})
         total += ckpt.save(tmp_path / f"{kind}.pt", include_training_state=False).stat().st_size
-    assert total < 20e6  # measured: ~9.7 MB
+    assert total < 20e6  # measured: ~8.7 MB (SD 3.5, DD 1.1, FD U-Net 4.2)
 
 
 DDP_SCRIPT = textwrap.dedent("""

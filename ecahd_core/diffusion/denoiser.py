@@ -32,7 +32,15 @@ concatenates the skip of the same level. Time: sinusoidal(t) -> Linear -> Mish -
 (after Mish -> Linear) in every block. Convolutions are local, so neighbouring waypoints are
 smooth from the start of training; the receptive field of the default (32, 64, 128), k = 5
 spans more than 100 waypoints, so the goal reaches the start. P is padded at the end (edge
-value) to a multiple of 2^(levels - 1) and cropped back. Outputs eps, as the Transformer.
+value) to a multiple of 2^(levels - 1) and cropped back.
+
+Prediction target (``DenoiserConfig.prediction``): "epsilon" as above, or "sample": the network
+outputs the clean trajectory x_0 (Diffuser's maze2d models, ``predict_epsilon=False``), and
+:class:`EpsilonFromSample` turns it into eps for the sampler. With eps-prediction the last DDIM
+step leaves sqrt(1 - alpha_bar) * (eps - eps_hat) in the sample: independent jitter of each
+waypoint, which on 100 waypoints 0.15 m apart doubled the path length of a briefly trained FD
+model (measured: 2.3 x A* at eta 0 against 1.2 x for x_0 prediction after the same 3000 steps);
+an x_0 prediction is as smooth as the network makes it.
 """
 from __future__ import annotations
 
@@ -52,6 +60,7 @@ class Denoiser(Protocol):
 
 
 ARCHITECTURES = ("transformer", "temporal_unet")
+PREDICTIONS = ("epsilon", "sample")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -74,6 +83,10 @@ class DenoiserConfig:
         unet_channels: channels of each U-Net level, finest first; P is halved between levels
             (temporal_unet). The first is also the time-embedding width.
         unet_kernel_size: odd temporal kernel of the U-Net convolutions (temporal_unet).
+        prediction: what the network outputs: "epsilon", the noise (the paper's objective), or
+            "sample", the clean trajectory x_0 (Diffuser's maze2d setting,
+            ``predict_epsilon=False``). Samplers always receive eps: a "sample" network is
+            wrapped in :class:`EpsilonFromSample` (``Checkpoint.build_model`` does this).
     """
 
     max_horizon: int
@@ -86,12 +99,14 @@ class DenoiserConfig:
     use_map_encoder: bool = False
     unet_channels: tuple[int, ...] = (32, 64, 128)
     unet_kernel_size: int = 5
+    prediction: str = "epsilon"
 
     def __post_init__(self) -> None:
-        if self.architecture not in ARCHITECTURES:
-            allowed = ", ".join(repr(a) for a in ARCHITECTURES)
-            raise ValueError(f"DenoiserConfig.architecture must be one of {allowed}, "
-                             f"got {self.architecture!r}")
+        for name, allowed in (("architecture", ARCHITECTURES), ("prediction", PREDICTIONS)):
+            if getattr(self, name) not in allowed:
+                raise ValueError(f"DenoiserConfig.{name} must be one of "
+                                 f"{', '.join(repr(a) for a in allowed)}, "
+                                 f"got {getattr(self, name)!r}")
         for name in ("max_horizon", "d_model", "n_layers", "n_heads", "ff_mult",
                      "unet_kernel_size"):
             object.__setattr__(self, name, _positive_int(f"DenoiserConfig.{name}",
@@ -365,10 +380,45 @@ class TemporalUnetDenoiser(nn.Module):
 
 
 def build_denoiser(config: DenoiserConfig) -> nn.Module:
-    """The denoiser ``config.architecture`` names, freshly initialised (torch's global RNG)."""
+    """The network ``config.architecture`` names, freshly initialised (torch's global RNG). It
+    outputs ``config.prediction``; see :class:`EpsilonFromSample` for eps."""
     if config.architecture == "temporal_unet":
         return TemporalUnetDenoiser(config)
     return TransformerDenoiser(config)
+
+
+class EpsilonFromSample(nn.Module):
+    """An x_0-predicting network (``prediction="sample"``) presented as eps_theta, what the
+    sampler and guidance expect: eps = (x_t - sqrt(alpha_bar_t) x0_hat) / sqrt(1 - alpha_bar_t).
+    The DDIM step inverts this exactly, so its pred_x0 is the network's x0_hat.
+
+    Args:
+        model: the network, (B, P, 2), (B,) -> x0_hat (B, P, 2).
+        alphas_cumprod: (K,) alpha_bar of the training schedule.
+    """
+
+    def __init__(self, model: nn.Module, alphas_cumprod: Tensor) -> None:
+        super().__init__()
+        self.model = model
+        self.register_buffer("alphas_cumprod", alphas_cumprod.detach().clone().float(),
+                             persistent=False)
+
+    @property
+    def config(self) -> DenoiserConfig:
+        return self.model.config
+
+    def forward(self, x: Tensor, t: Tensor | int, **kwargs: Any) -> Tensor:
+        t = _check_inputs(x, t, self.model.config.max_horizon)
+        x0 = self.model(x, t, **kwargs)  # (B, P, 2)
+        alpha_bar = self.alphas_cumprod[t].to(x.dtype)[:, None, None]  # (B, 1, 1)
+        return (x - alpha_bar.sqrt() * x0) / (1 - alpha_bar).sqrt()
+
+
+def as_noise_predictor(model: nn.Module, alphas_cumprod: Tensor) -> nn.Module:
+    """``model`` itself if it predicts eps, else wrapped in :class:`EpsilonFromSample`."""
+    if model.config.prediction == "sample":
+        return EpsilonFromSample(model, alphas_cumprod.to(next(model.parameters()).device))
+    return model
 
 
 def count_parameters(model: nn.Module) -> int:

@@ -7,6 +7,9 @@ skipped), a batch of
 expert trajectories x_0 (normalised), timesteps t ~ U{0..K-1} and noise eps; form
 x_t = sqrt(alpha_bar_t) x_0 + sqrt(1 - alpha_bar_t) eps, overwrite the inpainted waypoints of x_t
 with their clean values, and minimise || eps_theta(x_t, t) - eps ||^2 over the other waypoints.
+A network with ``DenoiserConfig.prediction = "sample"`` (the FD baseline, as Diffuser on maze2d)
+minimises || x0_theta(x_t, t) - x_0 ||^2 instead and is sampled through
+:class:`~ecahd_core.diffusion.denoiser.EpsilonFromSample`.
 
 Why the inpainted waypoints are overwritten and left out of the loss: at sampling time the start
 (and the goal, for goal-conditioned models) is reset to its clean value after every step
@@ -53,7 +56,7 @@ from torch.nn.parallel import DistributedDataParallel
 from tqdm import tqdm
 
 from ecahd_core.diffusion.conditioning import START_GOAL, apply_conditioning, condition_mask
-from ecahd_core.diffusion.denoiser import DenoiserConfig, build_denoiser
+from ecahd_core.diffusion.denoiser import DenoiserConfig, as_noise_predictor, build_denoiser
 from ecahd_core.diffusion.normalizer import Normalizer
 from ecahd_core.diffusion.scheduler import DDIMScheduler, NoiseSchedule, ScheduleConfig
 from ecahd_core.errors import CheckpointError, DatasetError
@@ -276,15 +279,18 @@ class Checkpoint:
 
     # ------------------------------------------------------------------------------ models
     def build_model(self, *, device: torch.device | str = "cpu") -> nn.Module:
-        """The EMA denoiser of the checkpoint's architecture, in eval mode, with no parameter
-        requiring gradients."""
+        """The EMA denoiser of the checkpoint's architecture as eps_theta (an x_0-predicting
+        network is wrapped in :class:`~ecahd_core.diffusion.denoiser.EpsilonFromSample`), in
+        eval mode, with no parameter requiring gradients."""
         model = build_denoiser(self.model_config)
         try:
             model.load_state_dict(self.ema_state_dict)
         except RuntimeError as exc:
             raise CheckpointError(f"checkpoint '{self.source}': weights do not fit its model "
                                   f"config: {exc}") from exc
-        return model.to(device).eval().requires_grad_(False)
+        model = model.to(device)
+        alphas_cumprod = NoiseSchedule(self.schedule_config).alphas_cumprod
+        return as_noise_predictor(model, alphas_cumprod).eval().requires_grad_(False)
 
     def build_scheduler(self, *, device: torch.device | str = "cpu", **kwargs: Any
                         ) -> DDIMScheduler:
@@ -340,7 +346,7 @@ class TrainResult:
         path: the checkpoint written by rank 0.
         step: optimiser steps done.
         loss_history: ((step, mean loss over the preceding log_every steps), ...), all ranks.
-        ema_model: the EMA denoiser in eval mode (what sampling uses).
+        ema_model: the EMA denoiser as eps_theta, in eval mode (what sampling uses).
         checkpoint: the checkpoint as written (rank 0), else None.
     """
 
@@ -485,6 +491,7 @@ def _train(model_config: DenoiserConfig, arrays: Mapping[int, Any], normalizer: 
     ema = copy.deepcopy(model).eval().requires_grad_(False)
     schedule = NoiseSchedule(cfg.schedule).to(device)
     K = schedule.num_train_timesteps
+    predict_sample = model_config.prediction == "sample"
     optimizer = torch.optim.AdamW(model.parameters(), lr=cfg.lr, betas=cfg.betas,
                                   weight_decay=cfg.weight_decay)
     warmup = cfg.warmup_steps
@@ -531,9 +538,10 @@ def _train(model_config: DenoiserConfig, arrays: Mapping[int, Any], normalizer: 
         # 2. forward process, then inpaint the clean start (/goal) as the sampler will
         x_t = schedule.add_noise(x0, noise, t)
         x_t = apply_conditioning(x_t, {i: x0[:, i] for i in cond_indices})
-        # 3. eps-prediction MSE over the free waypoints only
-        eps = net(x_t, t, **model_kwargs)
-        loss = (eps - noise).index_select(1, free[h]).pow(2).mean()
+        # 3. MSE of the prediction (eps, or x_0 for prediction="sample") over the free
+        #    waypoints only
+        target = x0 if predict_sample else noise
+        loss = (net(x_t, t, **model_kwargs) - target).index_select(1, free[h]).pow(2).mean()
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         if cfg.grad_clip_norm is not None:
@@ -570,7 +578,8 @@ def _train(model_config: DenoiserConfig, arrays: Mapping[int, Any], normalizer: 
     if world > 1:
         dist.barrier()
     return TrainResult(path=out_path, step=final_step, loss_history=tuple(history),
-                       ema_model=ema, checkpoint=checkpoint)
+                       ema_model=as_noise_predictor(ema, schedule.alphas_cumprod),
+                       checkpoint=checkpoint)
 
 
 def _cpu_state(state: Mapping[str, Tensor]) -> dict[str, Tensor]:
