@@ -9,7 +9,7 @@ Modules, by question:
 - ``collision``   the exact (non-differentiable) swept-footprint collision checker for evaluation
 - ``astar``       A* with footprint clearance, the expert and the classical baseline
 - ``dataset``     expert data for the SD / DD / FD models (Sec. IV-A)
-- ``diffusion``   noise schedule + DDIM, Transformer denoiser, sampler (inpainting, guidance), training
+- ``diffusion``   schedule + DDIM, denoisers (Transformer, FD's temporal U-Net), sampler, training
 - ``guidance``    the cost J as a guide for the sampler (Algorithm 2 line 5)
 - ``model_zoo``   training recipes, shipped models and their identity checks
 - ``planner``     SparseDiffusion (best of N), HierarchicalPlanner (Algorithms 1-2), FullDiffusion

@@ -7,9 +7,11 @@ import pytest
 import torch
 
 from ecahd_core.diffusion import DiffusionSampler
+from ecahd_core.diffusion.denoiser import (EpsilonFromSample, TemporalUnetDenoiser,
+                                           TransformerDenoiser)
 from ecahd_core.footprint import make_footprint
 from ecahd_core.maps import builtin_map
-from ecahd_core.model_zoo import MODELS_DIR, load_model, shipped_path
+from ecahd_core.model_zoo import MODELS_DIR, RECIPES, load_model, sample_steps, shipped_path
 from ecahd_ros.cli import main
 
 GRID = builtin_map("maze2d-large")
@@ -77,3 +79,23 @@ def test_plan_hierarchical_and_fd(tmp_path, method, guidance):
     traj = np.array(r["trajectory"])
     assert np.allclose(traj[0], [1.5, 1.5]) and np.allclose(traj[-1], [6.5, 5.5], atol=1e-5)
     assert r["method"] == method and r["dd_calls"] >= 0 and r["timings_ms"]["total"] > 0
+
+
+@pytest.mark.parametrize("kind, architecture", [("sd", "transformer"), ("dd", "transformer"),
+                                                ("fd", "temporal_unet")])
+def test_shipped_models_are_what_the_recipes_build(kind, architecture):
+    # `ecahd train-all` reproduces the shipped files: same architecture, size and budget. (SD
+    # and DD were written before DenoiserConfig.architecture existed and load as Transformers.)
+    ckpt = load_model(kind, GRID)
+    r = RECIPES[kind]
+    assert ckpt.model_config.architecture == architecture
+    assert ckpt.model_config == r.denoiser_config(max(ckpt.horizons))
+    model = ckpt.build_model()
+    if ckpt.model_config.prediction == "sample":  # FD predicts x_0, sampled as eps
+        assert isinstance(model, EpsilonFromSample)
+        model = model.model
+    assert type(model) is {"transformer": TransformerDenoiser,
+                           "temporal_unet": TemporalUnetDenoiser}[architecture]
+    assert (ckpt.step, ckpt.train_config["batch_size"]) == (r.steps, r.batch_size)
+    assert (ckpt.train_config["lr"], ckpt.train_config["ema_decay"]) == (r.lr, r.ema_decay)
+    assert sample_steps(ckpt) == r.sample_steps

@@ -66,7 +66,7 @@ def train_one(kind: str, dataset, *, out: Path, seed: int, device: str, steps: i
     warmup = warmup if warmup is not None else int(round(r.warmup_steps * min(1.0, steps_scale)))
     config = r.denoiser_config(max(arrays))
     tc = TrainConfig(steps=steps, batch_size=batch_size or r.batch_size, warmup_steps=warmup,
-                     ema_decay=r.ema_decay, seed=seed, device=device,
+                     lr=r.lr, ema_decay=r.ema_decay, seed=seed, device=device,
                      log_every=max(1, min(100, steps // 20)))
     normalizer = Normalizer.from_bounds(*dataset.grid().bounds)
     n = sum(len(a) for a in arrays.values())
