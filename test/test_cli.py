@@ -25,6 +25,20 @@ def test_plan_astar_writes_png_and_json(tmp_path):
     assert r["success"] and r["collision_free"] and r["timings_ms"]["total"] > 0
 
 
+@pytest.mark.parametrize("flags, polished", [([], True),
+                                             (["--polish-steps", "0", "--no-keep-better",
+                                               "--selection", "shortest_reaching"], False)])
+def test_plan_ecahd_with_our_rules_or_the_papers(tmp_path, flags, polished):
+    rec = tmp_path / "p.json"
+    assert main(["plan", "--method", "ecahd", "--map", "maze2d-large", "--robot", "circle",
+                 "--start", "1.5", "1.5", "--goal", "10.5", "7.5", "--json", str(rec),
+                 *flags]) == 0
+    r = json.loads(rec.read_text())
+    assert np.allclose(r["trajectory"][-1], [10.5, 7.5], atol=1e-5)
+    # the circle robot's local plans all trigger DD; only our rules polish them
+    assert (r["timings_ms"]["polish"] > 0) == polished
+
+
 @pytest.mark.parametrize("goal, message", [
     (["0.5", "0.5"], "inside an obstacle"),
     (["50", "1"], "outside the map"),

@@ -51,6 +51,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--polish-steps", type=int, default=None,
                    help="ECAHD/HD: J-descent steps on local plans still above c_th (ours, "
                         "beyond the paper; 0: the paper's Algorithm 1; default DenseConfig's)")
+    p.add_argument("--no-keep-better", action="store_true",
+                   help="ECAHD/HD: accept DD's plan even when J finds the straight one cheaper "
+                        "(the paper's rule)")
     p.add_argument("--seed", type=int, default=0, help="sampling seed")
     p.add_argument("--sd-model", default=None, help="SD checkpoint (default: the shipped one)")
     p.add_argument("--dd-model", default=None, help="DD checkpoint (default: the shipped one)")
@@ -138,6 +141,7 @@ def _plan_diffusion(args, grid, footprint, start, goal):
                                     SparseDiffusion)
 
     polish = {} if args.polish_steps is None else {"polish_steps": args.polish_steps}
+    polish["keep_better"] = not args.no_keep_better
     guided = _guided(args)
     cc = CostConfig()
     cost = (cc.make_costmap(grid), torch.as_tensor(footprint.points, dtype=torch.float32), cc)
