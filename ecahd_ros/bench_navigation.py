@@ -75,6 +75,7 @@ class NavigationBenchSettings:
     variants: tuple[str, ...] = VARIANT_KEYS
     realtime_factor: float = 4.0
     max_steps: int = 800
+    hold_steps: int = 10  # an episode ends once the goal is held this long (800: D4RL's length)
     domain_id: int | None = None  # the first variant's; the others count up. None: from the pid
 
 
@@ -152,7 +153,8 @@ def run_navigation_benchmark(settings: NavigationBenchSettings, out: Path, *,
         config = DemoConfig(out=out / variant.key, episodes=settings.episodes,
                             robot=settings.robot, map=settings.map, seed=settings.seed,
                             realtime_factor=settings.realtime_factor,
-                            max_steps=settings.max_steps, domain_id=base + i,
+                            max_steps=settings.max_steps, hold_steps=settings.hold_steps,
+                            domain_id=base + i,
                             planner_params=dict(variant.planner_params),
                             refiner_params=dict(variant.refiner_params))
         t0 = time.monotonic()
@@ -243,8 +245,9 @@ def format_markdown(result: NavigationBenchResult) -> str:
         f"every {c['control_period_s']:g} s of sim time ({c['control_rate_hz']:g} Hz), "
         f"|v| <= {c['max_v']:g} m/s, |w| <= {c['max_w']:g} rad/s, |dv/dt| <= "
         f"{c['max_accel']:g} m/s²; sim_bridge stops the robot {c['control_timeout_s']:g} s "
-        f"after the last cmd_vel. An episode ends once the goal is held for 10 control steps or "
-        f"after {s.max_steps} steps (the paper counts reward over all 800). Inference time: "
+        f"after the last cmd_vel. An episode ends once the goal is held for "
+        f"{s.hold_steps} control steps or after {s.max_steps} steps (the paper "
+        f"counts reward over all 800; --hold-steps 800 does too). Inference time: "
         f"the planning records (SD / FD / A*, J checks, DD), not the control ticks. Machine: "
         f"{m.get('cpu', '?')}, {m.get('logical_cpus', '?')} logical CPUs, torch "
         f"{m.get('torch', '?')} with {m.get('torch_threads', '?')} thread(s) per process, "
@@ -262,6 +265,8 @@ def command_line(settings: NavigationBenchSettings) -> str:
         argv += ["--realtime-factor", f"{settings.realtime_factor:g}"]
     if settings.max_steps != d.max_steps:
         argv += ["--max-steps", str(settings.max_steps)]
+    if settings.hold_steps != d.hold_steps:
+        argv += ["--hold-steps", str(settings.hold_steps)]
     return shlex.join(argv)
 
 
@@ -310,6 +315,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--realtime-factor", type=float, default=d.realtime_factor,
                    help="sim seconds per wall second")
     p.add_argument("--max-steps", type=int, default=d.max_steps, help="control steps per episode")
+    p.add_argument("--hold-steps", type=int, default=d.hold_steps,
+                   help="control steps the reached goal is held before the next episode "
+                        "(>= max-steps: every episode runs its full length, as D4RL counts)")
     p.add_argument("--domain-id", type=int, default=None,
                    help="ROS_DOMAIN_ID of the first variant, the others count up (None: "
                         "from the process id)")
@@ -325,13 +333,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from ecahd_core.errors import EcahdError
 
-    if args.episodes < 1 or args.max_steps < 1:
-        raise EcahdError("bench navigation needs --episodes >= 1 and --max-steps >= 1")
+    if args.episodes < 1 or args.max_steps < 1 or args.hold_steps < 0:
+        raise EcahdError("bench navigation needs --episodes >= 1, --max-steps >= 1 and "
+                         "--hold-steps >= 0")
     settings = NavigationBenchSettings(
         episodes=args.episodes, seed=args.seed, robot=args.robot, map=args.map,
         variants=tuple(k for k in VARIANT_KEYS if k in args.variants),
         realtime_factor=args.realtime_factor, max_steps=args.max_steps,
-        domain_id=args.domain_id)
+        hold_steps=args.hold_steps, domain_id=args.domain_id)
     out = (Path(args.out) if args.out
            else Path("runs") / time.strftime("bench-navigation-%Y%m%d-%H%M%S"))
     result = run_navigation_benchmark(settings, out, progress=not args.no_progress)

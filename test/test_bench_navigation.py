@@ -91,7 +91,8 @@ def test_one_tiny_run_writes_json_md_and_results(tmp_path):
     results = tmp_path / "RESULTS.md"
     results.write_text(f"# R\n\n{nav.BEGIN}\nstale block\n{nav.END}\n")
     code = main(["bench", "navigation", "--episodes", "1", "--variants", "astar",
-                 "--max-steps", "60", "--out", str(tmp_path / "runs"), "--json",
+                 "--max-steps", "60", "--hold-steps", "5", "--out", str(tmp_path / "runs"),
+                 "--json",
                  str(tmp_path / "nav.json"), "--md", str(tmp_path / "nav.md"), "--results",
                  str(results), "--no-progress"])
     assert code == 0
@@ -103,5 +104,6 @@ def test_one_tiny_run_writes_json_md_and_results(tmp_path):
     stages = variant["episodes"][0]["stage_ms"]
     assert "astar" in stages and "sd" not in stages and "dd" not in stages  # w/o DD
     text = results.read_text()
-    assert "stale block" not in text and "--variants astar --max-steps 60" in text
-    assert "A* + controller" in (tmp_path / "nav.md").read_text()
+    assert "stale block" not in text and "--variants astar --max-steps 60 --hold-steps 5" in text
+    md = (tmp_path / "nav.md").read_text()
+    assert "A* + controller" in md and "held for 5 control steps" in md
