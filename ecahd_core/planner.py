@@ -260,6 +260,26 @@ class HierarchicalPlan:
         return int(sum(self.dd_segments))
 
 
+@dataclass(frozen=True)
+class LocalStage:
+    """One segment's local stage (:meth:`HierarchicalPlanner.local_stage`).
+
+    Attributes:
+        plan: (P^l, 2) [m] float32, the local plan to follow.
+        c_before, c_after: c^l of the straight plan, and of ``plan``.
+        dd_used: DD ran (c_before > c_th).
+        polished: polishing ran.
+        timings_ms: wall time of "j_check", "dd" and "polish".
+    """
+
+    plan: torch.Tensor
+    c_before: float
+    c_after: float
+    dd_used: bool
+    polished: bool
+    timings_ms: dict
+
+
 REPLAN_POLICIES = ("every_waypoint", "once")
 
 
@@ -352,15 +372,44 @@ class HierarchicalPlanner:
         """Whether the polishing rule is on (it follows DD: off when DD is disabled)."""
         return self.dd is not None and self.dense.polish_steps > 0
 
+    def local_stage(self, a: torch.Tensor, b: torch.Tensor, *, end_fixed: bool = True,
+                    generator: torch.Generator | None = None) -> LocalStage:
+        """Algorithm 1 lines 13-18 for one segment, with our rules: the straight LocalPlan(a, b)
+        of P^l points, its collision cost c^l, DD when c^l > c_th (keep-better: DD's plan only
+        if J finds it no costlier), polishing while still above c_th (the start stays; the end
+        too when ``end_fixed``). a, b: (2,) [m] float32 -> LocalStage."""
+        P_l = self.dense.points
+        times = {"j_check": 0.0, "dd": 0.0, "polish": 0.0}
+        local = a + torch.linspace(0.0, 1.0, P_l)[:, None] * (b - a)  # (P^l, 2)
+        t0 = time.perf_counter()
+        c = c_after = float(self.local_cost(local[None], b[None])[0])
+        times["j_check"] = (time.perf_counter() - t0) * 1e3
+        used = self.dd is not None and c > self.dense.c_th  # line 15
+        if used:
+            t0 = time.perf_counter()
+            seg, cost = self.refine(a[None], b[None], generator=generator)
+            if not (self.dense.keep_better and float(cost[0]) > c):
+                local, c_after = seg[0], float(cost[0])
+            times["dd"] = (time.perf_counter() - t0) * 1e3
+        moved = self.polishing and c_after > self.dense.c_th
+        if moved:
+            t0 = time.perf_counter()
+            fixed = torch.zeros(P_l, dtype=torch.bool)
+            fixed[0], fixed[-1] = True, end_fixed
+            seg, cost = self.polish(local[None], fixed)
+            local, c_after = seg[0], float(cost[0])
+            times["polish"] = (time.perf_counter() - t0) * 1e3
+        return LocalStage(plan=local, c_before=c, c_after=c_after, dd_used=used, polished=moved,
+                          timings_ms=times)
+
     def plan(self, start, goal, *, generator: torch.Generator | None = None) -> HierarchicalPlan:
         """Run Algorithm 1 from ``start`` to ``goal`` ((2,) [m] each)."""
-        P_g, P_l = self.sparse.config.horizon, self.dense.points
+        P_g = self.sparse.config.horizon
         S = torch.as_tensor(np.asarray(start, dtype=np.float32))
         G = torch.as_tensor(np.asarray(goal, dtype=np.float32))
         t_total = time.perf_counter()
         times = {"sd": 0.0, "j_check": 0.0, "dd": 0.0, "polish": 0.0}
         global_plans, segments, dd_used, costs, polished = [], [], [], [], []
-        frac = torch.linspace(0.0, 1.0, P_l)[:, None]
         if self.replan == "once":
             return self._plan_once(S, G, generator, t_total)
         for p in range(P_g - 1):  # Algorithm 1 line 1 (the last iteration reaches G)
@@ -369,27 +418,12 @@ class HierarchicalPlanner:
                                          generator=generator).waypoints  # lines 2-12
             times["sd"] += (time.perf_counter() - t0) * 1e3
             wp = torch.as_tensor(waypoints, dtype=torch.float32)
-            a, b = wp[0], wp[1]
-            local = a + frac * (b - a)  # LocalPlan(t^g[0], t^g[1]): (P^l, 2)
-            t0 = time.perf_counter()
-            c = float(self.local_cost(local[None], b[None])[0])
-            times["j_check"] += (time.perf_counter() - t0) * 1e3
-            c_after, used = c, False
-            if self.dd is not None and c > self.dense.c_th:  # line 15
-                t0 = time.perf_counter()
-                seg, cost = self.refine(a[None], b[None], generator=generator)
-                if not (self.dense.keep_better and float(cost[0]) > c):
-                    local, c_after = seg[0], float(cost[0])
-                times["dd"] += (time.perf_counter() - t0) * 1e3
-                used = True
-            moved = self.polishing and c_after > self.dense.c_th
-            if moved:  # our rule: the start stays, the end too when it is the goal
-                t0 = time.perf_counter()
-                fixed = torch.zeros(P_l, dtype=torch.bool)
-                fixed[0], fixed[-1] = True, p == P_g - 2
-                seg, cost = self.polish(local[None], fixed)
-                local, c_after = seg[0], float(cost[0])
-                times["polish"] += (time.perf_counter() - t0) * 1e3
+            stage = self.local_stage(wp[0], wp[1], end_fixed=p == P_g - 2,
+                                     generator=generator)  # lines 13-18
+            for k, ms in stage.timings_ms.items():
+                times[k] += ms
+            local, c, c_after, used, moved = (stage.plan, stage.c_before, stage.c_after,
+                                              stage.dd_used, stage.polished)
             global_plans.append(waypoints)
             segments.append(local.numpy().astype(np.float64))
             dd_used.append(used)

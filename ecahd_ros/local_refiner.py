@@ -318,30 +318,18 @@ class LocalRefiner(Node):
             self.waypoints[self.target - 1]
         local = straight_local_plan(start, end, self.points)
         stage, c_before, c_after, ms = "straight", None, None, 0.0
-        if self.planner is not None:
+        if self.planner is not None:  # both ends stay: the pose and the planner's waypoint
             t0 = time.perf_counter()
-            seg = torch.as_tensor(local, dtype=torch.float32)[None]
-            goal = torch.as_tensor(end, dtype=torch.float32)[None]
-            c_before = c_after = float(self.planner.local_cost(seg, goal)[0])
-            stage = "j_check"
-            if p.dd_enabled and c_before > p.c_th:  # Algorithm 1 line 15
-                refined, cost = self.planner.refine(seg[:, 0], goal, generator=self.generator)
-                stage = "dd"
-                self.dd_calls += 1
-                # ours (DenseConfig.keep_better): DD never replaces a cheaper straight plan
-                if not (self.planner.dense.keep_better and float(cost[0]) > c_before):
-                    local = refined[0].numpy().astype(np.float64)
-                    local[0], local[-1] = start, end
-                    c_after = float(cost[0])
-                if self.planner.polishing and c_after > p.c_th:  # ours: both ends stay
-                    fixed = torch.zeros(self.points, dtype=torch.bool)
-                    fixed[0] = fixed[-1] = True
-                    polished, cost = self.planner.polish(
-                        torch.as_tensor(local, dtype=torch.float32)[None], fixed)
-                    local = polished[0].numpy().astype(np.float64)
-                    local[0], local[-1] = start, end
-                    c_after = float(cost[0])
+            result = self.planner.local_stage(torch.as_tensor(start, dtype=torch.float32),
+                                              torch.as_tensor(end, dtype=torch.float32),
+                                              end_fixed=True, generator=self.generator)
             ms = (time.perf_counter() - t0) * 1e3
+            c_before, c_after = result.c_before, result.c_after
+            stage = "dd" if result.dd_used else "j_check"
+            self.dd_calls += int(result.dd_used)
+            if result.dd_used or result.polished:
+                local = result.plan.numpy().astype(np.float64)
+                local[0], local[-1] = start, end
         self.local = local
         self.local_costs = (c_before, c_after)
         stamp = self.get_clock().now()
