@@ -43,6 +43,16 @@ _COSINE_S = 0.008  # improved-DDPM offset
 _MAX_BETA = 0.999  # improved-DDPM clip, avoids a singular last step
 
 
+def parse_choice(cls, value, what: str):
+    """``cls(value)`` for a str Enum ``cls``; a ValueError naming ``what`` and the allowed
+    values otherwise."""
+    try:
+        return cls(value)
+    except ValueError:
+        allowed = ", ".join(repr(m.value) for m in cls)
+        raise ValueError(f"unknown {what} {value!r}; allowed: {allowed}") from None
+
+
 class BetaSchedule(str, Enum):
     """Allowed beta schedules."""
 
@@ -51,11 +61,7 @@ class BetaSchedule(str, Enum):
 
     @classmethod
     def parse(cls, value: "str | BetaSchedule") -> "BetaSchedule":
-        try:
-            return cls(value)
-        except ValueError:
-            allowed = ", ".join(repr(m.value) for m in cls)
-            raise ValueError(f"unknown beta schedule {value!r}; allowed: {allowed}") from None
+        return parse_choice(cls, value, "beta schedule")
 
 
 @dataclass(frozen=True, kw_only=True)

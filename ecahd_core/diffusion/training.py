@@ -58,7 +58,8 @@ from tqdm import tqdm
 from ecahd_core.diffusion.conditioning import START_GOAL, apply_conditioning, condition_mask
 from ecahd_core.diffusion.denoiser import DenoiserConfig, as_noise_predictor, build_denoiser
 from ecahd_core.diffusion.normalizer import Normalizer
-from ecahd_core.diffusion.scheduler import DDIMScheduler, NoiseSchedule, ScheduleConfig
+from ecahd_core.diffusion.scheduler import (DDIMScheduler, NoiseSchedule, ScheduleConfig,
+                                            parse_choice)
 from ecahd_core.errors import CheckpointError, DatasetError
 
 log = logging.getLogger(__name__)
@@ -77,11 +78,7 @@ class ModelKind(str, Enum):
 
     @classmethod
     def parse(cls, value: "str | ModelKind") -> "ModelKind":
-        try:
-            return cls(value)
-        except ValueError:
-            allowed = ", ".join(repr(m.value) for m in cls)
-            raise ValueError(f"unknown model kind {value!r}; allowed: {allowed}") from None
+        return parse_choice(cls, value, "model kind")
 
 
 @dataclass(frozen=True, kw_only=True)
