@@ -151,7 +151,8 @@ def run_demo(config: DemoConfig) -> DemoResult:
     from ecahd_core.errors import EcahdError
     from ecahd_ros.bag_recorder import BagRecorder
     from ecahd_ros.eval_bag import evaluate_bag, write_outputs
-    from ecahd_ros.global_planner import PLAN_QOS, GlobalPlanner
+    from ecahd_ros.global_planner import GlobalPlanner
+    from ecahd_ros.qos import PLAN_QOS
     from ecahd_ros.local_refiner import LocalRefiner
     from sim_bridge.node import SimBridge
 

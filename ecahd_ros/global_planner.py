@@ -63,22 +63,16 @@ import torch
 from geometry_msgs.msg import Point, PoseStamped
 from nav_msgs.msg import OccupancyGrid, Odometry, Path
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ecahd_core.errors import EcahdError, PlanningError
 from ecahd_core.planner import SELECTION_RULES, SparseConfig, SparseDiffusion, SparsePlan
 from ecahd_ros.conversions import msg_to_grid, timing_message, xy_to_path
-from ecahd_ros.map_publisher import MAP_QOS
+from ecahd_ros.qos import MAP_QOS, PLAN_QOS, STREAM_QOS, VIZ_QOS
 from ecahd_ros.params import (ParamSpec, declare_parameters, read_parameters, require,
                               require_non_negative, require_positive, robot_spec)
 from ecahd_ros.spin import spin_node
-
-STREAM_QOS = QoSProfile(depth=10)  # reliable, volatile
-PLAN_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
-MARKER_QOS = QoSProfile(depth=1)
 
 METHODS = ("sd", "astar", "fd")  # ECAHD's Sparse Diffusion; the Table III baselines' planners
 ASTAR_SPACING = 0.25  # [m] most distance between consecutive points of a published A* path
@@ -199,7 +193,7 @@ class GlobalPlanner(Node):
         torch.set_num_threads(self.params.torch_threads)
         self.generator = torch.Generator().manual_seed(self.params.seed)
         self._plan_pub = self.create_publisher(Path, "plan", PLAN_QOS)
-        self._cand_pub = self.create_publisher(MarkerArray, "plan_candidates", MARKER_QOS)
+        self._cand_pub = self.create_publisher(MarkerArray, "plan_candidates", VIZ_QOS)
         self._timing_pub = self.create_publisher(String, "ecahd/timing", STREAM_QOS)
         self.create_subscription(OccupancyGrid, "map", self._guard(self._on_map), MAP_QOS)
         self.create_subscription(PoseStamped, "goal_pose", self._guard(self._on_goal),

@@ -54,7 +54,6 @@ import torch
 from geometry_msgs.msg import Point, Twist, TwistStamped
 from nav_msgs.msg import OccupancyGrid, Odometry, Path
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
 from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -63,14 +62,10 @@ from ecahd_core.errors import EcahdError, PlanningError
 from ecahd_core.planner import DenseConfig
 from ecahd_ros.conversions import (msg_to_grid, path_to_xy, timing_message, xy_to_path,
                                    yaw_from_quaternion)
-from ecahd_ros.global_planner import PLAN_QOS
-from ecahd_ros.map_publisher import MAP_QOS
+from ecahd_ros.qos import MAP_QOS, PLAN_QOS, STREAM_QOS, VIZ_QOS
 from ecahd_ros.params import (ParamSpec, declare_parameters, read_parameters, require,
                               require_non_negative, require_positive, robot_spec)
 from ecahd_ros.spin import spin_node
-
-STREAM_QOS = QoSProfile(depth=10)
-VIZ_QOS = QoSProfile(depth=1)
 
 PARAMETERS = [
     ParamSpec("dd_model", "", "DD checkpoint path; '' = the shipped model for map_name"),

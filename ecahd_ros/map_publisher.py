@@ -12,17 +12,14 @@ from __future__ import annotations
 
 import rclpy
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from nav_msgs.msg import OccupancyGrid
 
 from ecahd_core.errors import EcahdError
 from ecahd_core.maps import GridMap, load_map
 from ecahd_ros.conversions import grid_to_msg
+from ecahd_ros.qos import MAP_QOS
 from ecahd_ros.params import ParamSpec, declare_parameters
 from ecahd_ros.spin import spin_node
-
-MAP_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 PARAMETERS = [
     ParamSpec("map", "maze2d-large", "built-in maze name or path to a Nav2 map YAML"),

@@ -47,14 +47,13 @@ from geometry_msgs.msg import PoseWithCovarianceStamped, Twist, TwistStamped
 from nav_msgs.msg import OccupancyGrid, Odometry
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import Image
 from std_msgs.msg import Bool
 
 from ecahd_core.errors import EcahdError
 from ecahd_ros.conversions import grid_to_msg, pose_from_xy_yaw, yaw_from_quaternion
-from ecahd_ros.map_publisher import MAP_QOS
+from ecahd_ros.qos import MAP_QOS, STREAM_QOS, VIZ_QOS
 from ecahd_ros.params import ParamSpec, declare_parameters, read_parameters
 from ecahd_ros.spin import spin_node
 from sim_bridge.sim import MazeSim, SimConfig, SimError, SimState
@@ -62,8 +61,6 @@ from sim_bridge.sim import MazeSim, SimConfig, SimError, SimState
 CAMERA_SIZE = 256  # [px] longer side of the top-down image
 MAP_FRAME = "map"
 BASE_FRAME = "base_link"
-STREAM_QOS = QoSProfile(depth=10)  # reliable, volatile
-CAMERA_QOS = QoSProfile(depth=1)
 
 # one place for every parameter of the node
 PARAMETERS = [
@@ -158,7 +155,7 @@ class SimBridge(Node):
         self._odom_pub = self.create_publisher(Odometry, "odom", STREAM_QOS)
         self._clock_pub = self.create_publisher(ClockMsg, "clock", STREAM_QOS)
         self._collision_pub = self.create_publisher(Bool, "collision", STREAM_QOS)
-        self._camera_pub = (self.create_publisher(Image, "camera/image_raw", CAMERA_QOS)
+        self._camera_pub = (self.create_publisher(Image, "camera/image_raw", VIZ_QOS)
                             if p.publish_camera else None)
         cmd_type = TwistStamped if p.enable_stamped_cmd_vel else Twist
         self.create_subscription(cmd_type, "cmd_vel", self._on_cmd_vel, STREAM_QOS)

@@ -22,7 +22,7 @@ import ecahd_ros.bag_recorder as bag_recorder  # noqa: E402
 from ecahd_core.maps import builtin_map  # noqa: E402
 from ecahd_ros.bag_recorder import BagError, BagRecorder, read_bag  # noqa: E402
 from ecahd_ros.conversions import grid_to_msg  # noqa: E402
-from ecahd_ros.map_publisher import MAP_QOS  # noqa: E402
+from ecahd_ros.qos import MAP_QOS  # noqa: E402
 
 N = 20  # messages per streamed topic
 

@@ -20,9 +20,10 @@ from visualization_msgs.msg import MarkerArray  # noqa: E402
 from ecahd_core.errors import EcahdError  # noqa: E402
 from ecahd_core.maps import builtin_map  # noqa: E402
 from ecahd_ros.conversions import grid_to_msg, path_to_xy  # noqa: E402
-from ecahd_ros.global_planner import (ASTAR_SPACING, PARAMETERS, PLAN_QOS,  # noqa: E402
+from ecahd_ros.qos import PLAN_QOS  # noqa: E402
+from ecahd_ros.global_planner import (ASTAR_SPACING, PARAMETERS,  # noqa: E402
                                       GlobalPlanner, GlobalPlannerParams)
-from ecahd_ros.map_publisher import MAP_QOS  # noqa: E402
+from ecahd_ros.qos import MAP_QOS  # noqa: E402
 
 ROBOT = (1.5, 1.5)  # free corridor cell of maze2d-large
 GOAL = (6.5, 5.5)  # free, a few corridors away

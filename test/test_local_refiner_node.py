@@ -19,10 +19,10 @@ from std_msgs.msg import String  # noqa: E402
 from ecahd_core.errors import EcahdError  # noqa: E402
 from ecahd_core.maps import builtin_map  # noqa: E402
 from ecahd_ros.conversions import grid_to_msg, path_to_xy, pose_from_xy_yaw, xy_to_path  # noqa: E402
-from ecahd_ros.global_planner import PLAN_QOS  # noqa: E402
+from ecahd_ros.qos import PLAN_QOS  # noqa: E402
 from ecahd_core.controller import lookahead_point, pure_pursuit  # noqa: E402
 from ecahd_ros.local_refiner import LocalRefiner, LocalRefinerParams  # noqa: E402
-from ecahd_ros.map_publisher import MAP_QOS  # noqa: E402
+from ecahd_ros.qos import MAP_QOS  # noqa: E402
 
 RATE = 20.0  # [Hz] control_rate in these tests
 # maze2d-large: y in [1, 2] is free for x in [1, 3]; x in [2, 3] is free for y in [1, 4]

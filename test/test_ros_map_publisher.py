@@ -12,7 +12,8 @@ from nav_msgs.msg import OccupancyGrid  # noqa: E402
 from ecahd_core.maps import builtin_map  # noqa: E402
 from ecahd_ros.conversions import (grid_to_msg, msg_to_grid, path_to_xy, xy_to_path,  # noqa: E402
                                    yaw_from_quaternion)
-from ecahd_ros.map_publisher import MAP_QOS, MapPublisher  # noqa: E402
+from ecahd_ros.map_publisher import MapPublisher  # noqa: E402
+from ecahd_ros.qos import MAP_QOS  # noqa: E402
 
 
 

@@ -18,7 +18,7 @@ from std_msgs.msg import Bool  # noqa: E402
 
 from ecahd_core.maps import builtin_map  # noqa: E402
 from ecahd_ros.conversions import msg_to_grid, pose_from_xy_yaw, yaw_from_quaternion  # noqa: E402
-from ecahd_ros.map_publisher import MAP_QOS  # noqa: E402
+from ecahd_ros.qos import MAP_QOS  # noqa: E402
 from sim_bridge.node import SimBridge  # noqa: E402
 
 START = (1.5, 1.5, 0.0)  # umaze corridor y in [1, 2], free for x in [1, 4]

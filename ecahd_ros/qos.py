@@ -1,0 +1,19 @@
+"""The one home of the QoS profiles every ecahd_ros node and sim_bridge use (STYLE.md habit 12).
+
+    MAP_QOS     map (OccupancyGrid): reliable, transient_local, depth 1, as Nav2's map_server.
+    PLAN_QOS    plan (Path): reliable, transient_local, depth 1: a restarted refiner gets the
+                latest plan.
+    STREAM_QOS  odom, cmd_vel, goal_pose, clock, collision, scan, ecahd/timing: reliable,
+                volatile, depth 10.
+    VIZ_QOS     RViz-only topics (markers, local_plan, camera): reliable, volatile, depth 1.
+"""
+from __future__ import annotations
+
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+MAP_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+PLAN_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+STREAM_QOS = QoSProfile(depth=10)
+VIZ_QOS = QoSProfile(depth=1)
