@@ -63,3 +63,35 @@ def pure_pursuit(pose: tuple[float, float, float], target: np.ndarray, goal_dist
     v = float(np.clip(v_target, v_prev - p.max_accel * dt, v_prev + p.max_accel * dt))
     v = max(0.0, v)
     return v, float(np.clip(v * kappa, -p.max_w, p.max_w))
+
+
+class PathTracker:
+    """Pure pursuit's memory of one path: resampled once (RESAMPLE_STEP apart), with the index
+    of the point nearest the robot kept between ticks, so a tick searches only a window of
+    ``window`` m of arc length ahead of it: the work per tick does not grow with the path.
+
+    path: (N, 2) [m]."""
+
+    def __init__(self, path: np.ndarray, *, window: float = 2.0) -> None:
+        self.points = resample(np.asarray(path, dtype=np.float64).reshape(-1, 2))  # (M, 2)
+        seg = np.linalg.norm(np.diff(self.points, axis=0), axis=1)
+        self._arc = np.concatenate([[0.0], np.cumsum(seg)])  # (M,) [m] arc length
+        self._window = max(2, int(math.ceil(window / RESAMPLE_STEP)))
+        self.index = 0  # the point nearest the robot at the last tick
+
+    @property
+    def end(self) -> np.ndarray:
+        return self.points[-1]
+
+    def lookahead(self, xy: np.ndarray, lookahead: float) -> tuple[np.ndarray, float]:
+        """(the first point beyond the nearest one at least ``lookahead`` m from ``xy``, or the
+        window's last point / the path's end; the arc length [m] left from the nearest point
+        to the path's end)."""
+        lo, hi = self.index, min(len(self.points), self.index + self._window)
+        pts = self.points[lo:hi]
+        d = np.linalg.norm(pts - np.asarray(xy)[None], axis=1)
+        near = int(np.argmin(d))
+        self.index = lo + near
+        ahead = np.flatnonzero(d[near:] >= lookahead)
+        target = pts[near + ahead[0]] if len(ahead) else pts[-1]
+        return target, float(self._arc[-1] - self._arc[self.index])

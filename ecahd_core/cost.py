@@ -101,6 +101,40 @@ _DEFAULTS = CostConfig()
 
 
 @dataclass(frozen=True)
+class CollisionCost:
+    """The one object that owns J's inputs for a map and a robot: the cost map, the footprint's
+    sample points R as a float32 tensor (one tensor per robot, so J's sweep-matrix cache hits
+    on every call) and the CostConfig. Build it once per map with :meth:`build`.
+
+    Attributes:
+        costmap: the collision cost map (Eqs. 10-13).
+        footprint_points: (R, 2) [m] float32 tensor, the footprint's sample points.
+        config: the CostConfig J runs with.
+    """
+
+    costmap: CostMap
+    footprint_points: torch.Tensor
+    config: CostConfig
+
+    @classmethod
+    def build(cls, grid: GridMap, footprint, config: CostConfig | None = None) -> "CollisionCost":
+        """From a GridMap and a :class:`~ecahd_core.footprint.Footprint` (its ``points``)."""
+        config = config or CostConfig()
+        points = torch.as_tensor(footprint.points, dtype=torch.float32).contiguous()
+        return cls(costmap=config.make_costmap(grid), footprint_points=points, config=config)
+
+    def as_tuple(self) -> tuple[CostMap, torch.Tensor, CostConfig]:
+        """(costmap, footprint_points, config): the ``cost=`` argument of the planners."""
+        return self.costmap, self.footprint_points, self.config
+
+    def collision_cost(self, traj: torch.Tensor) -> torch.Tensor:
+        """c^l of each trajectory: traj (B, P, 2) [m] -> (B,) J's collision cost."""
+        terms = trajectory_cost(traj, traj[:, -1], self.footprint_points, self.costmap,
+                                **self.config.cost_kwargs())
+        return terms.collision_cost
+
+
+@dataclass(frozen=True)
 class CostTerms:
     """The pair returned by J (Algorithm 2 line 24).
 

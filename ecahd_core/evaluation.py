@@ -38,7 +38,7 @@ from ecahd_core.maps import GridMap
 
 GOAL_RADIUS = 0.5  # [m] maze2d "within reach" radius of the sparse reward
 MAX_STEPS = 800  # control steps per episode in maze2d-large-v1
-CONTROL_PERIOD = 0.1  # [s of sim time] the local refiner's 10 Hz
+CONTROL_PERIOD = 0.1  # [s of sim time] one Table III step (D4RL maze2d: 800 steps per episode)
 _STILL = 1e-6  # [m] odometry samples closer than this to the previous one are dropped
 CONTROL_STAGE = "control"  # timing stage of a control tick: latency, not inference time
 

@@ -141,6 +141,23 @@ def shipped_path(map_name: str, kind: str) -> Path:
     return MODELS_DIR / f"{map_name}_{kind}.pt"
 
 
+def check_model(kind: str, map_name: str, *, path: str | Path | None = None, footprint=None,
+                horizon: int | None = None) -> Path:
+    """A node's start-up check of its model, before any map arrives: the checkpoint exists, is
+    readable, is of ``kind``, for ``map_name``, fits the robot and the horizon. Returns the
+    path. The map's fingerprint is checked later by :func:`load_model`, on the received grid.
+    Raises CheckpointError naming the problem."""
+    from types import SimpleNamespace
+
+    grid = SimpleNamespace(name=map_name, fingerprint=None)
+    if path is None:
+        path = shipped_path(map_name, kind)
+        if not path.is_file():
+            _check_shipped(kind, map_name, path)
+    _check_fit(_read_checkpoint(kind, grid, path, fingerprint=False), path, footprint, horizon)
+    return path
+
+
 def load_model(kind: str, grid, *, path: str | Path | None = None, footprint=None,
                horizon: int | None = None, device: str = "cpu"):
     """Load a checkpoint for ``grid`` and check it fits the request.
@@ -158,19 +175,33 @@ def load_model(kind: str, grid, *, path: str | Path | None = None, footprint=Non
     Raises:
         CheckpointError naming the mismatch.
     """
-    from ecahd_core.diffusion.training import load_checkpoint
-
     if kind not in KINDS:
         raise CheckpointError(f"unknown model kind {kind!r}; allowed: {list(KINDS)}")
     if path is None:
         path = shipped_path(grid.name, kind)
         if not path.is_file():
-            shipped = sorted(p.stem for p in MODELS_DIR.glob("*.pt"))
-            raise CheckpointError(f"no shipped {kind!r} model for map {grid.name!r} (shipped: "
-                                  f"{shipped}); train one with `ecahd train-all --map ...`")
-    ckpt = load_checkpoint(path, expect={"kind": kind, "map_name": grid.name,
-                                         "map_fingerprint": grid.fingerprint()},
-                           map_location=device)
+            _check_shipped(kind, grid.name, path)
+    ckpt = _read_checkpoint(kind, grid, path, device=device)
+    _check_fit(ckpt, path, footprint, horizon)
+    return ckpt
+
+
+def _check_shipped(kind: str, map_name: str, path) -> None:
+    shipped = sorted(p.stem for p in MODELS_DIR.glob("*.pt"))
+    raise CheckpointError(f"no shipped {kind!r} model for map {map_name!r} at '{path}' "
+                          f"(shipped: {shipped}); train one with `ecahd train-all --map ...`")
+
+
+def _read_checkpoint(kind: str, grid, path, *, fingerprint: bool = True, device: str = "cpu"):
+    from ecahd_core.diffusion.training import load_checkpoint
+
+    expect = {"kind": kind, "map_name": grid.name}
+    if fingerprint:
+        expect["map_fingerprint"] = grid.fingerprint()
+    return load_checkpoint(path, expect=expect, map_location=device)
+
+
+def _check_fit(ckpt, path, footprint, horizon) -> None:
     if footprint is not None:
         clearance = float(ckpt.meta.get("clearance", 0.0))
         if footprint.circumscribed_radius > clearance + 1e-6:
@@ -179,9 +210,8 @@ def load_model(kind: str, grid, *, path: str | Path | None = None, footprint=Non
                 f"clearance (robot {ckpt.meta.get('robot')!r}); robot {footprint.name!r} needs "
                 f"{footprint.circumscribed_radius:.3f} m: train a model for this robot")
     if horizon is not None and int(horizon) not in ckpt.horizons:
-        raise CheckpointError(f"checkpoint '{path}' ({kind}) was trained for horizons "
-                              f"{list(ckpt.horizons)}, not {horizon}")
-    return ckpt
+        raise CheckpointError(f"checkpoint '{path}' was trained for "
+                              f"horizons {list(ckpt.horizons)}, not {horizon}")
 
 
 def sample_steps(checkpoint) -> int:

@@ -1,12 +1,15 @@
 """global_planner: ECAHD's Sparse Diffusion global planner as a node (paper Sec. III-A,
 Algorithm 1 lines 2-11 with its shrinking horizon), and the Table III baselines' global planners.
 
-A goal becomes a plan here. With ``method`` "sd" (ECAHD): on ``goal_pose`` the node samples N
+A goal becomes a plan here. The node is a thin shell over
+:class:`ecahd_core.navigation.GlobalRunner` (when to plan, unit-tested without ROS). With
+``method`` "sd" (ECAHD): on ``goal_pose`` the node samples N
 candidate global plans of P^g waypoints from the robot's pose (``odom``) to the goal in one
 batch, keeps the best of N and publishes its waypoints on ``plan``. When the robot comes within
 ``waypoint_tolerance`` of the next waypoint p, it replans from its current pose with horizon
 P^g - p (Algorithm 1: the global plan t^g_p shrinks by one waypoint per iteration), down to the
-straight [pose, goal] at horizon 2.
+straight [pose, goal] at horizon 2. With ``replan`` "once" one SD plan serves the whole goal.
+Goals that arrive faster than 20 per second are coalesced (the latest is planned).
 
 The baselines plan once per goal (and again on a map update), with no per-waypoint replanning
 and no ``replan_timeout``; their whole path goes out on ``plan`` for the local refiner to follow:
@@ -34,9 +37,12 @@ Parameters (read-only, declared in :data:`PARAMETERS`):
     global_frame (str, "map"): frame of goals and plans.
     waypoint_tolerance (double, 0.3): [m] distance to the next waypoint that triggers a replan
         (sd); distance to the goal that ends it (all methods).
+    replan (str, "every_waypoint"): sd: Algorithm 1's replanning at each waypoint, or "once".
     replan_timeout (double, 5.0): [s] no waypoint reached for this long replans (sd); 0 = never.
     seed (int, 0): seed of the sampler's torch.Generator (a seed reproduces a plan sequence).
     torch_threads (int, 1): torch.set_num_threads.
+A parameter out of range, an unknown robot or an unreadable model ends the node at start-up
+with one error line and exit code 1 (``ecahd_ros.spin``).
 
 Subscribes:
     map (nav_msgs/OccupancyGrid; reliable, transient_local, depth 1): rebuilds the planner and
@@ -44,7 +50,8 @@ Subscribes:
     goal_pose (geometry_msgs/PoseStamped; reliable, depth 10): frame must be ``global_frame``;
         finite, on the map and free, else logged and ignored (the current plan stays). A new
         goal pre-empts the current one; a goal before map and odometry is queued.
-    odom (nav_msgs/Odometry; reliable, depth 10): the robot's pose in ``global_frame``.
+    odom (nav_msgs/Odometry; reliable, depth 10): the robot's pose in ``global_frame``;
+        non-finite or absurd poses are logged and ignored.
 Publishes:
     plan (nav_msgs/Path; reliable, transient_local, depth 1): the selected sparse waypoints
         (sd) or the whole path (astar, fd), first = robot pose, last = the goal exactly.
@@ -59,7 +66,6 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-import torch
 from geometry_msgs.msg import Point, PoseStamped
 from nav_msgs.msg import OccupancyGrid, Odometry, Path
 from rclpy.node import Node
@@ -67,11 +73,13 @@ from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ecahd_core.errors import EcahdError, PlanningError
+from ecahd_core.navigation import (REPLAN_POLICIES, GlobalRunner, GlobalRunnerConfig,
+                                   PlanRequest, validate_pose)
 from ecahd_core.planner import SELECTION_RULES, SparseConfig, SparseDiffusion, SparsePlan
 from ecahd_ros.conversions import msg_to_grid, timing_message, xy_to_path
+from ecahd_ros.params import (ParamSpec, declare_parameters, make_robot, read_parameters,
+                              require, require_non_negative, require_positive, shared)
 from ecahd_ros.qos import MAP_QOS, PLAN_QOS, STREAM_QOS, VIZ_QOS
-from ecahd_ros.params import (ParamSpec, declare_parameters, read_parameters, require,
-                              require_non_negative, require_positive, robot_spec)
 from ecahd_ros.spin import spin_node
 
 METHODS = ("sd", "astar", "fd")  # ECAHD's Sparse Diffusion; the Table III baselines' planners
@@ -83,25 +91,22 @@ PARAMETERS = [
     ParamSpec("sd_model", "", "SD checkpoint path; '' = the shipped model for map_name"),
     ParamSpec("fd_model", "", "FD checkpoint path (method fd); '' = the shipped model"),
     ParamSpec("fd_guidance", False, "method fd: guide the Full Diffusion sample by J"),
-    ParamSpec("map_name", "maze2d-large", "name of the map on 'map' (checked against the "
-                                          "checkpoint with the grid's fingerprint)"),
+    *shared("map_name"),
     ParamSpec("num_candidates", 10, "N, candidate global plans sampled in one batch"),
     ParamSpec("horizon", 10, "P^g, waypoints of the first global plan"),
     ParamSpec("ddim_steps", 0, "DDIM steps of SD or FD; 0 = the checkpoint's"),
     ParamSpec("epsilon", 1.0, "[m] goal-reaching radius of the best-of-N rule"),
     ParamSpec("selection", "collision_aware", f"best-of-N rule: {list(SELECTION_RULES)} "
                                               "(shortest_reaching: Sec. III-A's)"),
-    ParamSpec("robot", "circle", "footprint preset: circle, quadruped, humanoid"),
-    ParamSpec("footprint", "", "Nav2 footprint polygon '[[x, y], ...]' [m]; overrides robot"),
-    ParamSpec("footprint_padding", 0.0, "[m] grows the footprint (Nav2 footprint_padding)"),
-    ParamSpec("global_frame", "map", "frame of goals, odometry poses and plans"),
+    *shared("robot", "footprint", "footprint_padding", "global_frame"),
     ParamSpec("waypoint_tolerance", 0.3, "[m] reaching the next waypoint this close replans "
                                          "with horizon P^g - p (sd); the goal this close is "
                                          "reached"),
+    ParamSpec("replan", "every_waypoint", f"sd: {list(REPLAN_POLICIES)} (every_waypoint: "
+                                          "Algorithm 1; once: one SD plan per goal)"),
     ParamSpec("replan_timeout", 5.0, "[s] sd: with no waypoint reached for this long, replan "
                                      "from the current pose (same horizon); 0 = never"),
-    ParamSpec("seed", 0, "seed of the sampler's torch.Generator"),
-    ParamSpec("torch_threads", 1, "torch.set_num_threads for this process"),
+    *shared("seed", "torch_threads"),
 ]
 
 
@@ -124,6 +129,7 @@ class GlobalPlannerParams:
     footprint_padding: float
     global_frame: str
     waypoint_tolerance: float
+    replan: str
     replan_timeout: float
     seed: int
     torch_threads: int
@@ -138,6 +144,14 @@ class GlobalPlannerParams:
                 f"one of {list(SELECTION_RULES)}")
         require(bool(self.global_frame), "global_frame", self.global_frame, "non-empty")
         require(bool(self.map_name), "map_name", self.map_name, "non-empty")
+        require(self.replan in REPLAN_POLICIES, "replan", self.replan,
+                f"one of {list(REPLAN_POLICIES)}")
+
+    def runner_config(self) -> GlobalRunnerConfig:
+        # the baselines plan one whole path per goal
+        return GlobalRunnerConfig(horizon=self.horizon, waypoint_tolerance=self.waypoint_tolerance,
+                                  replan_timeout=self.replan_timeout if self.method == "sd" else 0,
+                                  replan=self.replan if self.method == "sd" else "once")
 
     def sparse_config(self) -> SparseConfig:
         return SparseConfig(num_candidates=self.num_candidates, horizon=self.horizon,
@@ -171,27 +185,28 @@ class GlobalPlanner(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("global_planner", **kwargs)
         declare_parameters(self, PARAMETERS)
-        self.params: GlobalPlannerParams | None = None
+        # configuration errors raise: spin_node exits non-zero with one line
+        self.params: GlobalPlannerParams = read_parameters(self, PARAMETERS, GlobalPlannerParams)
+        p = self.params
+        self.footprint = make_robot(p)
+        if p.method in ("sd", "fd"):  # an unreadable or mismatched model fails now
+            from ecahd_core.model_zoo import check_model
+
+            check_model(p.method, p.map_name,
+                        path=(p.sd_model if p.method == "sd" else p.fd_model) or None,
+                        footprint=self.footprint, horizon=p.horizon if p.method == "sd" else None)
+        from ecahd_core.threads import set_torch_threads
+
+        import torch
+
+        set_torch_threads(p.torch_threads)
+        self.generator = torch.Generator().manual_seed(p.seed)
         self.grid = None
         self.sparse: SparseDiffusion | None = None  # method sd
         self.astar = None  # method astar: ecahd_core.astar.AStarPlanner
         self.fd = None  # method fd: ecahd_core.planner.FullDiffusion
-        self.pose: np.ndarray | None = None  # (2,) [m] latest odometry position
-        self.goal: np.ndarray | None = None  # (2,) [m] active (or queued) goal
-        self.waypoints: np.ndarray | None = None  # (P, 2) [m] current plan
-        self.iteration = 0  # p of Algorithm 1: waypoints reached since the goal arrived
-        try:
-            self.params = read_parameters(self, PARAMETERS, GlobalPlannerParams)
-            from ecahd_core.footprint import make_footprint
-
-            p = self.params
-            self.footprint = make_footprint(robot_spec(p.robot, p.footprint),
-                                            padding=p.footprint_padding)
-        except EcahdError as exc:
-            self.get_logger().error(f"global_planner cannot start: {exc}")
-            return
-        torch.set_num_threads(self.params.torch_threads)
-        self.generator = torch.Generator().manual_seed(self.params.seed)
+        self.pose: np.ndarray | None = None  # (2,) [m] latest valid odometry position
+        self.runner = GlobalRunner(p.runner_config())
         self._plan_pub = self.create_publisher(Path, "plan", PLAN_QOS)
         self._cand_pub = self.create_publisher(MarkerArray, "plan_candidates", VIZ_QOS)
         self._timing_pub = self.create_publisher(String, "ecahd/timing", STREAM_QOS)
@@ -199,6 +214,8 @@ class GlobalPlanner(Node):
         self.create_subscription(PoseStamped, "goal_pose", self._guard(self._on_goal),
                                  STREAM_QOS)
         self.create_subscription(Odometry, "odom", self._guard(self._on_odom), STREAM_QOS)
+        # a goal coalesced in a burst is planned within one period even without odometry
+        self.create_timer(p.runner_config().min_plan_interval, self._guard(self._on_pending))
         what = f"SD, N={p.num_candidates}, P^g={p.horizon}" if p.method == "sd" else p.method
         self.get_logger().info(f"global planner ready: {what}, robot {self.footprint.name!r}, "
                                "waiting for map and odom")
@@ -208,13 +225,21 @@ class GlobalPlanner(Node):
         """A map arrived and the planner of ``method`` is built on it."""
         return any(x is not None for x in (self.sparse, self.astar, self.fd))
 
+    @property
+    def goal(self) -> np.ndarray | None:
+        return self.runner.goal
+
+    @property
+    def waypoints(self) -> np.ndarray | None:
+        return self.runner.waypoints
+
     # ------------------------------------------------------------------------- callbacks
     def _guard(self, callback):
         """Wrap a callback so no exception escapes: EcahdError is logged as an error, anything
         else with its traceback."""
-        def wrapped(msg) -> None:
+        def wrapped(*msg) -> None:
             try:
-                callback(msg)
+                callback(*msg)
             except EcahdError as exc:
                 self.get_logger().error(str(exc))
             except Exception:  # noqa: BLE001 (a node must survive a bug in one message)
@@ -224,50 +249,50 @@ class GlobalPlanner(Node):
                                         f"{traceback.format_exc()}")
         return wrapped
 
+    def _now(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
+
     def _on_map(self, msg: OccupancyGrid) -> None:
         p = self.params
-        # a map we cannot plan on leaves no stale planner behind
-        self.sparse = self.astar = self.fd = None
+        if msg.header.frame_id != p.global_frame:
+            raise EcahdError(f"map in frame {msg.header.frame_id!r} ignored: expected "
+                             f"{p.global_frame!r}")
         grid = msg_to_grid(msg, name=p.map_name)
+        sparse = astar = fd = None
         if p.method == "sd":
-            self.sparse = self._build_sd(grid)
+            sparse = self._build_sd(grid)
         elif p.method == "astar":
             from ecahd_core.astar import AStarPlanner, clearance_for_footprint
 
-            self.astar = AStarPlanner(grid, clearance_for_footprint(self.footprint))
+            astar = AStarPlanner(grid, clearance_for_footprint(self.footprint))
         else:
-            self.fd = self._build_fd(grid)
-        self.grid = grid
+            fd = self._build_fd(grid)
+        self.grid, self.sparse, self.astar, self.fd = grid, sparse, astar, fd
         self.get_logger().info(f"map {grid.name!r} received ({grid.width} x {grid.height} "
                                f"cells); {p.method} planner built")
-        if self.goal is not None and self.pose is not None:
-            self._plan_to_goal(reset=True)
+        if self.runner.goal is not None:
+            self.runner.set_goal(self.runner.goal)  # plan again on the new map
+            self._step()
 
     def _build_sd(self, grid) -> SparseDiffusion:
-        from ecahd_core.cost import CostConfig
+        from ecahd_core.cost import CollisionCost
         from ecahd_core.model_zoo import load_model
 
         p = self.params
         ckpt = load_model("sd", grid, path=p.sd_model or None, footprint=self.footprint,
                           horizon=p.horizon)
-        cost = None
-        if p.selection == "collision_aware":
-            cost_config = CostConfig()
-            cost = (cost_config.make_costmap(grid), self.footprint.points, cost_config)
+        cost = (CollisionCost.build(grid, self.footprint).as_tuple()
+                if p.selection == "collision_aware" else None)
         return SparseDiffusion(ckpt, p.sparse_config(), cost=cost)
 
     def _build_fd(self, grid):
-        from ecahd_core.cost import CostConfig
+        from ecahd_core.cost import CollisionCost
         from ecahd_core.model_zoo import load_model
         from ecahd_core.planner import FullDiffusion
 
         p = self.params
         ckpt = load_model("fd", grid, path=p.fd_model or None, footprint=self.footprint)
-        cost = None
-        if p.fd_guidance:
-            cost_config = CostConfig()
-            cost = (cost_config.make_costmap(grid),
-                    torch.as_tensor(self.footprint.points, dtype=torch.float32), cost_config)
+        cost = CollisionCost.build(grid, self.footprint).as_tuple() if p.fd_guidance else None
         return FullDiffusion(ckpt, guidance=p.fd_guidance, cost=cost,
                              num_steps=p.ddim_steps or None)
 
@@ -277,84 +302,79 @@ class GlobalPlanner(Node):
         if frame != p.global_frame:
             raise PlanningError(f"goal rejected: frame {frame!r} is not the global frame "
                                 f"{p.global_frame!r}")
-        xy = np.array([msg.pose.position.x, msg.pose.position.y], dtype=np.float64)
-        if not np.all(np.isfinite(xy)):
-            raise PlanningError(f"goal rejected: non-finite coordinates {xy.tolist()}")
-        if self.grid is not None:
-            try:
+        try:
+            x, y, _ = validate_pose((msg.pose.position.x, msg.pose.position.y, 0.0), "goal")
+            xy = np.array([x, y])
+            if self.grid is not None:
                 xy = self.grid.validate_point(xy, "goal")
-            except PlanningError as exc:
-                raise PlanningError(f"goal rejected: {exc}") from None
-        self.goal = xy
+        except PlanningError as exc:
+            raise PlanningError(f"goal rejected: {exc}") from None
+        self.runner.set_goal(xy)
         if not self.ready or self.pose is None:
             missing = " and ".join(n for n, ok in (("map", self.ready),
                                                    ("odom", self.pose is not None)) if not ok)
             self.get_logger().info(f"goal ({xy[0]:.2f}, {xy[1]:.2f}) queued until {missing} "
                                    f"arrive(s)")
             return
-        self._plan_to_goal(reset=True)
+        self._step()
 
     def _on_odom(self, msg: Odometry) -> None:
         if msg.header.frame_id and msg.header.frame_id != self.params.global_frame:
             raise PlanningError(f"odometry in frame {msg.header.frame_id!r}, expected "
                                 f"{self.params.global_frame!r}: ignored")
-        first = self.pose is None
-        self.pose = np.array([msg.pose.pose.position.x, msg.pose.pose.position.y])
-        if self.goal is None or not self.ready:
+        pos = msg.pose.pose.position
+        try:
+            x, y, _ = validate_pose((pos.x, pos.y, 0.0), "odometry pose")
+        except PlanningError as exc:
+            raise PlanningError(f"odometry ignored: {exc}") from None
+        self.pose = np.array([x, y])
+        self._step()
+
+    def _on_pending(self) -> None:
+        if self.runner.pending:
+            self._step()
+
+    def _step(self) -> None:
+        """Ask the runner what to do at the current pose, and do it."""
+        if not self.ready or self.pose is None:
             return
-        if first or self.waypoints is None:
-            self._plan_to_goal(reset=True)  # the queued goal
-            return
-        if self.params.method != "sd":  # one whole path per goal: only notice the goal reached
-            if np.linalg.norm(self.pose - self.goal) < self.params.waypoint_tolerance:
-                self.get_logger().info(f"goal ({self.goal[0]:.2f}, {self.goal[1]:.2f}) reached")
-                self.goal = None
-            return
-        nxt = self.waypoints[1]
-        if np.linalg.norm(self.pose - nxt) >= self.params.waypoint_tolerance:
-            timeout = self.params.replan_timeout
-            waited = (self.get_clock().now() - self._last_plan_time).nanoseconds * 1e-9
-            if timeout > 0 and waited > timeout:  # beyond the paper: a stuck robot replans
-                self.get_logger().warning(f"no waypoint reached for {waited:.1f} s: replanning "
-                                          "from the current pose")
-                self._plan_to_goal(reset=False)
-            return
-        if len(self.waypoints) <= 2:  # the next waypoint is the goal
-            self.get_logger().info(f"goal ({self.goal[0]:.2f}, {self.goal[1]:.2f}) reached")
-            self.goal = None
-            return
-        self.iteration += 1  # Algorithm 1: MoveAgent reached t^g_p[1]; replan with P^g - p
-        self._plan_to_goal(reset=False)
+        goal = self.runner.goal
+        event = self.runner.step(self.pose, self._now())
+        if event == "reached":
+            self.get_logger().info(f"goal ({goal[0]:.2f}, {goal[1]:.2f}) reached")
+        elif isinstance(event, PlanRequest):
+            if event.reason == "timeout":
+                self.get_logger().warning("no waypoint reached for "
+                                          f"{self.params.replan_timeout:g} s: replanning from "
+                                          "the current pose")
+            self._plan(event)
 
     # ----------------------------------------------------------------------------- planning
-    def _plan_to_goal(self, *, reset: bool) -> None:
-        """Plan from the current pose to the goal and publish: SD best-of-N with horizon
-        P^g - p, or the baseline's whole path."""
-        if reset:
-            self.iteration = 0
-        try:  # a goal queued before the map is checked here
-            self.goal = self.grid.validate_point(self.goal, "goal")
+    def _plan(self, request: PlanRequest) -> None:
+        """Plan for ``request`` and publish: SD best-of-N with its horizon, or the baseline's
+        whole path. A goal that cannot be planned to is dropped."""
+        try:
+            goal = self.grid.validate_point(request.goal, "goal")
+            start = self.grid.validate_point(request.start, "robot pose")
         except PlanningError as exc:
-            self.goal = None
-            raise PlanningError(f"goal rejected: {exc}") from None
-        start = self.grid.validate_point(self.pose, "robot pose")
+            if "goal" in str(exc).split(":")[0]:
+                self.runner.fail()
+            raise PlanningError(f"cannot plan: {exc}") from None
         method, result, detail = self.params.method, None, ""
         if method == "sd":
-            horizon = max(2, self.params.horizon - self.iteration)
-            result = self.sparse.plan(start, self.goal, horizon=horizon,
+            result = self.sparse.plan(start, goal, horizon=request.horizon,
                                       generator=self.generator)
             waypoints, ms = result.waypoints.copy(), result.time_ms
             detail = f" (candidate {result.best} of {len(result.candidates)})"
         elif method == "astar":
-            waypoints, ms = self._plan_astar(start)
+            waypoints, ms = self._plan_astar(start, goal)
         else:
             t0 = time.perf_counter()
-            waypoints = self.fd.plan(start, self.goal, generator=self.generator)
+            waypoints = self.fd.plan(start, goal, generator=self.generator)
             ms = (time.perf_counter() - t0) * 1e3
-        waypoints[0], waypoints[-1] = start, self.goal  # exact ends (the models work in float32)
-        self.waypoints = waypoints
+        waypoints[0], waypoints[-1] = start, goal  # exact ends (the models work in float32)
         stamp = self.get_clock().now()
-        self._last_plan_time = stamp
+        self.runner.accept(waypoints, stamp.nanoseconds * 1e-9)
         self._plan_pub.publish(xy_to_path(waypoints, self.params.global_frame, stamp.to_msg()))
         if result is not None:
             self._cand_pub.publish(candidate_markers(result, self.params.global_frame,
@@ -362,27 +382,26 @@ class GlobalPlanner(Node):
         self._timing_pub.publish(timing_message(method, ms, stamp.nanoseconds * 1e-9,
                                                 horizon=len(waypoints)))
         self.get_logger().info(f"{method} plan of {len(waypoints)} points to "
-                               f"({self.goal[0]:.2f}, {self.goal[1]:.2f}) in {ms:.1f} ms"
-                               f"{detail}")
+                               f"({goal[0]:.2f}, {goal[1]:.2f}) in {ms:.1f} ms{detail}")
 
-    def _plan_astar(self, start: np.ndarray) -> tuple[np.ndarray, float]:
-        """A* from ``start`` to the goal -> (path (N, 2) [m], ASTAR_SPACING apart at most;
-        wall time [ms]). An unreachable goal or one without clearance is rejected."""
+    def _plan_astar(self, start: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, float]:
+        """A* from ``start`` to ``goal`` -> (path (N, 2) [m], ASTAR_SPACING apart at most;
+        wall time [ms]). An unreachable goal or one without clearance is dropped."""
         from ecahd_core.astar import plan_from_pose
         from ecahd_core.controller import resample
 
         t0 = time.perf_counter()
         try:
-            path = plan_from_pose(self.astar, start, self.goal)
+            path = plan_from_pose(self.astar, start, goal)
         except PlanningError as exc:  # the pose was validated: the goal is the problem
-            self.goal = None
+            self.runner.fail()
             raise PlanningError(f"goal rejected: {exc}") from None
         path = resample(path, ASTAR_SPACING)
         return path, (time.perf_counter() - t0) * 1e3
 
 
 def main(args=None) -> None:
-    spin_node(GlobalPlanner, args)
+    spin_node(GlobalPlanner, args, name="global_planner")
 
 
 if __name__ == "__main__":

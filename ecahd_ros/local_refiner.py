@@ -1,101 +1,108 @@
 """local_refiner: ECAHD's local stage as a node (paper Algorithm 1 lines 13-18, Algorithm 2) with a
-pure-pursuit style controller that follows the result.
+pure-pursuit controller that follows the result. A thin shell over
+:class:`ecahd_core.navigation.LocalRunner` (the online logic, unit-tested without ROS).
 
-For the current segment of the global plan (the robot's pose -> the plan's next waypoint) it
-builds the straight local plan LocalPlan of P^l points, evaluates the collision cost c^l of J
-(surface sweep of the footprint) and, when c^l > c_th, replaces it by a Dense Diffusion sample
-guided by J (``HierarchicalPlanner.refine``); if the refined plan is still above c_th, its two
-interior points are polished by descending J (``polish_steps``, our rule beyond the paper; both
-ends stay: the robot's pose and the global planner's waypoint). This happens once per segment,
-inside the control tick: the first tick after a plan (or a map) arrives, and the tick in which
-the robot comes within ``waypoint_tolerance`` of the waypoint it is heading for; every other
-tick only tracks the current dense local plan. So the "control" timing records (the whole tick)
-include every J check and DD run, and the plan and map callbacks stay cheap.
+Each segment of the global plan (the first from the robot's pose when the plan arrived, then
+waypoint to waypoint) gets the straight local plan of P^l points, its collision cost c^l of J
+(surface sweep of the footprint) and, when c^l > c_th, a Dense Diffusion sample guided by J; a DD
+plan still above c_th is polished by descending J (``polish_steps``, ours). The exact
+swept-footprint checker judges the result: a local plan it finds in collision is never followed
+(zero velocity, a "blocked" warning). This work runs on a worker thread, ``prepare_ahead``
+segments ahead of the robot, so cmd_vel goes out at ``control_rate`` while DD runs: the control
+tick only tracks the current local plan (bounded work, whatever the plan's length) and takes
+over the next one when the robot reaches its waypoint. With nothing safe to follow (not refined
+yet, or blocked) the command is zero velocity.
 
 With ``dd_enabled`` false ("ECAHD w/o DD" of Table III, and the baselines' "no local planner")
-the straight local plans are followed as they are: J is still evaluated on each one (so the
-"j_check" timing records keep c_before, with c_after = c_before, for the diagnostics), DD never
-runs and no DD model is loaded.
+J is still evaluated on each straight plan (the timing records keep c_before), DD never runs and
+no DD model is loaded; the exact check still applies.
 
-Controller (every 1 / control_rate s): ``ecahd_core.controller``'s pure pursuit along the
-dense local plan, then the remaining waypoints, within max_v, max_w and max_accel. A zero
-command is published when there is no plan, when the odometry is older than ``stale_timeout``
-(or the plan older than ``plan_timeout`` when that is > 0), and once the goal (the plan's last
-point) is within ``goal_tolerance``; the plan is then dropped until a new one arrives.
+Controller (every 1 / control_rate s): pure pursuit within max_v, max_w and max_accel. Zero
+velocity with no plan, odometry older than ``stale_timeout`` (or a plan older than
+``plan_timeout`` when that is > 0), and once the goal (the plan's last point) is within
+``goal_tolerance``; the plan is then dropped until a new one arrives.
 
-Parameters (read-only, declared in :data:`PARAMETERS`): see the table there.
+Every message is validated before it changes state: a plan in another frame, with non-finite or
+off-map poses or more than 100 000 poses, NaN odometry, a malformed map: one error line, the
+message is dropped, the node keeps running (and keeps the last valid plan).
+
+Parameters: see :data:`PARAMETERS` (``max_v``, ``max_w``, ``max_accel``, ``lookahead``,
+``waypoint_tolerance``, ``goal_tolerance``, ``stale_timeout`` and ``plan_timeout`` can be changed
+at run time; the rest are read-only).
 
 Subscribes:
     plan (nav_msgs/Path; reliable, transient_local, depth 1): the global plan, frame
         ``global_frame``; an empty path stops the robot.
     odom (nav_msgs/Odometry; reliable, depth 10): pose in ``global_frame``.
     map (nav_msgs/OccupancyGrid; reliable, transient_local, depth 1): builds J's cost map and
-        loads the DD model; without a map the straight local plans are followed unchecked.
+        loads the DD model (in its own callback group: control goes on meanwhile); without a
+        map the straight local plans are followed unchecked.
 Publishes:
     cmd_vel (geometry_msgs/Twist, or TwistStamped with ``enable_stamped_cmd_vel``; reliable,
-        depth 10).
-    local_plan (nav_msgs/Path; reliable, depth 1): the current dense local plan (P^l points).
+        depth 10) at ``control_rate``.
+    local_plan (nav_msgs/Path; reliable, depth 1): the dense local plan being followed.
     local_plan_footprints (visualization_msgs/MarkerArray; reliable, depth 1): the footprint
-        outline at each local plan point (blue; red when c^l is still above c_th).
+        outline at each local plan point (blue; red when the segment is blocked).
     ecahd/timing (std_msgs/String; reliable, depth 10): JSON {"stage": "j_check" | "dd", "ms",
-        "c_before", "c_after", "stamp"} per segment, "dd" when DD ran (ms = J check + DD); and
-        {"stage": "control", "ms", "stamp"} after every control tick: the wall time of the
-        whole control callback, a J check + DD started in it included (so it is no planning
-        time of its own: ``ecahd eval-bag`` reports its p50 / p99 apart from inference time).
+        "c_before", "c_after", "safe", "stamp"} per segment ("dd" when DD ran; ms = the local
+        stage on the worker), and {"stage": "control", "ms", "reason", "stamp"} after every
+        control tick: the tick's wall time (``ecahd eval-bag`` reports its p50 / p99 apart from
+        inference time).
 """
 from __future__ import annotations
 
-import math
+import threading
 import time
 from dataclasses import dataclass
 
 import numpy as np
-import torch
 from geometry_msgs.msg import Point, Twist, TwistStamped
 from nav_msgs.msg import OccupancyGrid, Odometry, Path
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
-from ecahd_core.controller import lookahead_point, pure_pursuit, straight_local_plan
-from ecahd_core.errors import EcahdError, PlanningError
+from ecahd_core.errors import EcahdError
+from ecahd_core.navigation import LocalRunner, LocalRunnerConfig, SegmentResult
 from ecahd_core.planner import DenseConfig
 from ecahd_ros.conversions import (msg_to_grid, path_to_xy, timing_message, xy_to_path,
                                    yaw_from_quaternion)
+from ecahd_ros.params import (ParamSpec, declare_parameters, make_robot,
+                              on_parameter_change, read_parameters, require,
+                              require_non_negative, require_positive, shared)
 from ecahd_ros.qos import MAP_QOS, PLAN_QOS, STREAM_QOS, VIZ_QOS
-from ecahd_ros.params import (ParamSpec, declare_parameters, read_parameters, require,
-                              require_non_negative, require_positive, robot_spec)
 from ecahd_ros.spin import spin_node
 
 PARAMETERS = [
     ParamSpec("dd_model", "", "DD checkpoint path; '' = the shipped model for map_name"),
-    ParamSpec("map_name", "maze2d-large", "name of the map on 'map' (checked against the "
-                                          "checkpoint with the grid's fingerprint)"),
-    ParamSpec("robot", "circle", "footprint preset: circle, quadruped, humanoid"),
-    ParamSpec("footprint", "", "Nav2 footprint polygon '[[x, y], ...]' [m]; overrides robot"),
-    ParamSpec("footprint_padding", 0.0, "[m] grows the footprint (Nav2 footprint_padding)"),
-    ParamSpec("global_frame", "map", "frame of plans and odometry poses"),
+    *shared("map_name", "robot", "footprint", "footprint_padding", "global_frame"),
     ParamSpec("c_th", DenseConfig().c_th, "DD refines a local plan whose collision cost c^l "
                                           "exceeds this"),
     ParamSpec("dd_enabled", True, "run Dense Diffusion at all; false: follow the straight local "
                                   "plans (ECAHD w/o DD; J still checked for the diagnostics)"),
     ParamSpec("polish_steps", DenseConfig().polish_steps,
               "J-descent steps on a DD local plan still above c_th (ours); 0 = the paper"),
-    ParamSpec("control_rate", 10.0, "[Hz] cmd_vel rate"),
-    ParamSpec("max_v", 0.5, "[m/s] limit on |linear velocity|"),
-    ParamSpec("max_w", 1.5, "[rad/s] limit on |angular velocity|"),
-    ParamSpec("max_accel", 1.0, "[m/s^2] limit on |linear acceleration|"),
+    ParamSpec("control_rate", 20.0, "[Hz] cmd_vel rate (Nav2's controller_frequency default)"),
+    ParamSpec("prepare_ahead", 2, "segments refined ahead of the one being followed"),
+    ParamSpec("max_v", 0.5, "[m/s] limit on |linear velocity| (dynamic)"),
+    ParamSpec("max_w", 1.5, "[rad/s] limit on |angular velocity| (dynamic)"),
+    ParamSpec("max_accel", 1.0, "[m/s^2] limit on |linear acceleration| (dynamic)"),
     ParamSpec("lookahead", 0.25, "[m] pure-pursuit lookahead distance (0.4 cut corners: 3.7% "
-                                 "of sim steps in wall contact over 5 demo episodes, 0.25: 0%)"),
+                                 "of sim steps in wall contact over 5 demo episodes, 0.25: 0%; "
+                                 "dynamic)"),
     ParamSpec("waypoint_tolerance", 0.3, "[m] reaching a waypoint this close starts the next "
-                                         "segment"),
-    ParamSpec("goal_tolerance", 0.25, "[m] the goal (last plan point) counts as reached"),
-    ParamSpec("stale_timeout", 1.0, "[s] odometry older than this stops the robot"),
-    ParamSpec("plan_timeout", 0.0, "[s] a plan older than this stops the robot; 0 = never"),
+                                         "segment (dynamic)"),
+    ParamSpec("goal_tolerance", 0.25, "[m] the goal (last plan point) counts as reached "
+                                      "(dynamic)"),
+    ParamSpec("stale_timeout", 1.0, "[s] odometry older than this stops the robot (dynamic)"),
+    ParamSpec("plan_timeout", 0.0, "[s] a plan older than this stops the robot; 0 = never "
+                                   "(dynamic)"),
     ParamSpec("enable_stamped_cmd_vel", False, "publish geometry_msgs/TwistStamped on cmd_vel"),
-    ParamSpec("seed", 0, "seed of the DD sampler's torch.Generator"),
-    ParamSpec("torch_threads", 1, "torch.set_num_threads for this process"),
+    *shared("seed", "torch_threads"),
 ]
+DYNAMIC = ("max_v", "max_w", "max_accel", "lookahead", "waypoint_tolerance", "goal_tolerance",
+           "stale_timeout", "plan_timeout")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -112,6 +119,7 @@ class LocalRefinerParams:
     dd_enabled: bool
     polish_steps: int
     control_rate: float
+    prepare_ahead: int
     max_v: float
     max_w: float
     max_accel: float
@@ -129,8 +137,16 @@ class LocalRefinerParams:
                          "waypoint_tolerance", "goal_tolerance", "stale_timeout",
                          "torch_threads")
         require_non_negative(self, "c_th", "footprint_padding", "plan_timeout", "seed",
-                             "polish_steps")
+                             "polish_steps", "prepare_ahead")
         require(bool(self.global_frame), "global_frame", self.global_frame, "non-empty")
+
+    def runner_config(self) -> LocalRunnerConfig:
+        return LocalRunnerConfig(
+            control_period=1.0 / self.control_rate, max_v=self.max_v, max_w=self.max_w,
+            max_accel=self.max_accel, lookahead=self.lookahead,
+            waypoint_tolerance=self.waypoint_tolerance, goal_tolerance=self.goal_tolerance,
+            stale_timeout=self.stale_timeout, plan_timeout=self.plan_timeout,
+            prepare_ahead=self.prepare_ahead)
 
 
 def footprint_markers(footprint, local: np.ndarray, frame_id: str, stamp,
@@ -161,187 +177,176 @@ def footprint_markers(footprint, local: np.ndarray, frame_id: str, stamp,
 class LocalRefiner(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("local_refiner", **kwargs)
-        declare_parameters(self, PARAMETERS)
-        self.params: LocalRefinerParams | None = None
-        self.planner = None  # HierarchicalPlanner (its local stage only) once a map arrives
-        self.points = DenseConfig().points  # P^l
-        self.waypoints: np.ndarray | None = None  # (P, 2) [m] the global plan
-        self.target = 0  # index of the waypoint the current segment ends at
-        self.local: np.ndarray | None = None  # (P^l, 2) [m] the current dense local plan
-        self.local_costs: tuple[float, float] | None = None  # c^l before / after DD
-        self.dd_calls = 0
-        self.pose: tuple[float, float, float] | None = None  # x [m], y [m], yaw [rad]
-        self.odom_time = None  # rclpy Time of the latest odometry
-        self.plan_time = None
-        self.v = 0.0  # [m/s] last commanded linear velocity
-        try:
-            self.params = read_parameters(self, PARAMETERS, LocalRefinerParams)
-            from ecahd_core.footprint import make_footprint
+        declare_parameters(self, PARAMETERS, dynamic=DYNAMIC)
+        # configuration errors raise: spin_node exits non-zero with one line
+        self.params: LocalRefinerParams = read_parameters(self, PARAMETERS, LocalRefinerParams)
+        p = self.params
+        self.footprint = make_robot(p)
+        if p.dd_enabled:  # an unreadable or mismatched model fails now, not at the first map
+            from ecahd_core.model_zoo import check_model
 
-            p = self.params
-            self.footprint = make_footprint(robot_spec(p.robot, p.footprint),
-                                            padding=p.footprint_padding)
-        except EcahdError as exc:
-            self.get_logger().error(f"local_refiner cannot start: {exc}")
-            return
-        torch.set_num_threads(p.torch_threads)
+            check_model("dd", p.map_name, path=p.dd_model or None, footprint=self.footprint,
+                        horizon=DenseConfig().points)
+        from ecahd_core.threads import set_torch_threads
+
+        import torch
+
+        set_torch_threads(p.torch_threads)
         self.generator = torch.Generator().manual_seed(p.seed)
-        self.dt = 1.0 / p.control_rate
+        self.points = DenseConfig().points  # P^l
+        self.grid = None
+        self.planner = None  # HierarchicalPlanner (its local stage only) once a map arrives
+        self._lock = threading.Lock()  # the runner is shared by the callback threads
+        self.runner = LocalRunner(p.runner_config())
         self._cmd_type = TwistStamped if p.enable_stamped_cmd_vel else Twist
         self._cmd_pub = self.create_publisher(self._cmd_type, "cmd_vel", STREAM_QOS)
         self._local_pub = self.create_publisher(Path, "local_plan", VIZ_QOS)
         self._fp_pub = self.create_publisher(MarkerArray, "local_plan_footprints", VIZ_QOS)
         self._timing_pub = self.create_publisher(String, "ecahd/timing", STREAM_QOS)
-        self.create_subscription(Path, "plan", self._guard(self._on_plan), PLAN_QOS)
-        self.create_subscription(Odometry, "odom", self._guard(self._on_odom), STREAM_QOS)
-        self.create_subscription(OccupancyGrid, "map", self._guard(self._on_map), MAP_QOS)
-        self._timer = self.create_timer(self.dt, self._guard(self._on_control_timed))
+        inputs, maps = MutuallyExclusiveCallbackGroup(), MutuallyExclusiveCallbackGroup()
+        control = MutuallyExclusiveCallbackGroup()
+        self.create_subscription(Path, "plan", self._guard(self._on_plan), PLAN_QOS,
+                                 callback_group=inputs)
+        self.create_subscription(Odometry, "odom", self._guard(self._on_odom), STREAM_QOS,
+                                 callback_group=inputs)
+        self.create_subscription(OccupancyGrid, "map", self._guard(self._on_map), MAP_QOS,
+                                 callback_group=maps)
+        self._timer = self.create_timer(1.0 / p.control_rate, self._guard(self._on_control),
+                                        callback_group=control)
+        on_parameter_change(self, PARAMETERS, lambda: self.params, self._apply_params)
+        self._last_reason = None
         dd = f"DD above c_th={p.c_th:g}" if p.dd_enabled else "DD disabled"
         self.get_logger().info(f"local refiner ready: P^l={self.points}, {dd}, "
                                f"{p.control_rate:g} Hz, robot {self.footprint.name!r}")
 
+    # reading the runner's state (tests, the demo)
+    @property
+    def waypoints(self):
+        return self.runner.waypoints
+
+    @property
+    def dd_calls(self) -> int:
+        return self.runner.dd_calls
+
     def _guard(self, callback):
-        """Wrap a callback so no exception escapes; a failure also stops the robot."""
+        """Wrap a callback so no exception escapes: the error is logged in one line (a bug
+        with its traceback) and the message dropped; the node keeps running."""
         def wrapped(*args) -> None:
             try:
                 callback(*args)
             except EcahdError as exc:
                 self.get_logger().error(str(exc))
-                self._stop()
             except Exception:  # noqa: BLE001 (a node must survive a bug in one message)
                 import traceback
 
                 self.get_logger().error(f"{callback.__name__} failed:\n"
                                         f"{traceback.format_exc()}")
-                self._stop()
         return wrapped
+
+    def _apply_params(self, params: LocalRefinerParams) -> None:
+        with self._lock:
+            self.params = params
+            self.runner.config = params.runner_config()
+        self.get_logger().info("parameters updated")
+
+    def _now(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
 
     # ------------------------------------------------------------------------- callbacks
     def _on_map(self, msg: OccupancyGrid) -> None:
-        from ecahd_core.cost import CostConfig
+        from ecahd_core.cost import CollisionCost
         from ecahd_core.model_zoo import load_model
+        from ecahd_core.navigation import SegmentRefiner
         from ecahd_core.planner import HierarchicalPlanner
 
         p = self.params
-        self.planner = None
+        if msg.header.frame_id != p.global_frame:
+            raise EcahdError(f"map in frame {msg.header.frame_id!r} ignored: expected "
+                             f"{p.global_frame!r}")
         grid = msg_to_grid(msg, name=p.map_name)
         ckpt = (load_model("dd", grid, path=p.dd_model or None, footprint=self.footprint,
                            horizon=self.points) if p.dd_enabled else None)
-        cost_config = CostConfig()
-        # only the local stage (local_cost, refine) is used: no SD model here
-        self.planner = HierarchicalPlanner(
-            None, ckpt, costmap=cost_config.make_costmap(grid),
-            footprint_points=self.footprint.points, cost_config=cost_config,
+        cost = CollisionCost.build(grid, self.footprint)
+        # only the local stage (local_cost, refine, polish) is used: no SD model here
+        planner = HierarchicalPlanner(
+            None, ckpt, costmap=cost.costmap, footprint_points=cost.footprint_points,
+            cost_config=cost.config,
             dense=DenseConfig(points=self.points, c_th=p.c_th, enabled=p.dd_enabled,
                               polish_steps=p.polish_steps))
+        with self._lock:
+            self.grid, self.planner = grid, planner
+            self.runner.refine = SegmentRefiner(planner, grid, self.footprint,
+                                                generator=self.generator)
+            self.runner.reset_costs()  # the current plan's segments are refined on this map
         self.get_logger().info(f"map {grid.name!r} received; "
                                f"{'DD model and ' if p.dd_enabled else ''}cost J ready")
-        self.local = None  # the next control tick checks (and refines) the segment on this map
 
     def _on_plan(self, msg: Path) -> None:
         p = self.params
         if msg.header.frame_id != p.global_frame:
-            raise PlanningError(f"plan in frame {msg.header.frame_id!r} ignored: expected "
-                                f"{p.global_frame!r}")
+            raise EcahdError(f"plan in frame {msg.header.frame_id!r} ignored: expected "
+                             f"{p.global_frame!r}")
         xy = path_to_xy(msg)
-        if len(xy) == 0:
-            self.get_logger().info("empty plan: stopping")
-            self.waypoints = self.local = None
-            self._stop()
-            return
-        if not np.all(np.isfinite(xy)):
-            raise PlanningError("plan with non-finite coordinates ignored")
-        self.waypoints = xy if len(xy) > 1 else np.concatenate([xy, xy])
-        self.plan_time = self.get_clock().now()
-        self.target = 1
-        self.local = None  # the next control tick checks (and refines) the first segment
+        with self._lock:
+            if len(xy) == 0:
+                self.get_logger().info("empty plan: stopping")
+            bounds = self.grid.bounds if self.grid is not None else None
+            try:
+                self.runner.set_plan(xy, self._now(), bounds)
+            except EcahdError as exc:
+                raise EcahdError(f"plan ignored: {exc}") from None
 
     def _on_odom(self, msg: Odometry) -> None:
         if msg.header.frame_id and msg.header.frame_id != self.params.global_frame:
-            raise PlanningError(f"odometry in frame {msg.header.frame_id!r} ignored: expected "
-                                f"{self.params.global_frame!r}")
+            raise EcahdError(f"odometry in frame {msg.header.frame_id!r} ignored: expected "
+                             f"{self.params.global_frame!r}")
         pose = msg.pose.pose
         xyyaw = (pose.position.x, pose.position.y, yaw_from_quaternion(pose.orientation))
-        if not all(math.isfinite(v) for v in xyyaw):
-            raise PlanningError("odometry with non-finite pose ignored")
-        self.pose = xyyaw
-        self.odom_time = self.get_clock().now()
-
-    def _on_control_timed(self) -> None:
-        """The control tick, its wall time published as a "control" timing record."""
-        t0 = time.perf_counter()
-        try:
-            self._on_control()
-        finally:
-            ms = (time.perf_counter() - t0) * 1e3
-            self._timing_pub.publish(timing_message(
-                "control", ms, self.get_clock().now().nanoseconds * 1e-9))
+        with self._lock:
+            try:
+                self.runner.set_pose(xyyaw, self._now())
+            except EcahdError as exc:
+                raise EcahdError(f"odometry ignored: {exc}") from None
 
     def _on_control(self) -> None:
-        p = self.params
-        if self.waypoints is not None and self.local is None and self.pose is not None:
-            self._start_segment()  # a new plan or map: every J check and DD runs in a tick
-        if self.waypoints is None or self.local is None or self.pose is None:
-            return self._stop()
-        now = self.get_clock().now()
-        if (now - self.odom_time).nanoseconds * 1e-9 > p.stale_timeout:
-            return self._stop()
-        if p.plan_timeout > 0 and (now - self.plan_time).nanoseconds * 1e-9 > p.plan_timeout:
-            return self._stop()
-        xy = np.array(self.pose[:2])
-        goal_distance = float(np.linalg.norm(self.waypoints[-1] - xy))
-        if goal_distance < p.goal_tolerance:
-            self.get_logger().info("goal reached")
-            self.waypoints = self.local = None
-            return self._stop()
-        last = len(self.waypoints) - 1
-        if (self.target < last
-                and np.linalg.norm(self.waypoints[self.target] - xy) < p.waypoint_tolerance):
-            self.target += 1  # a new segment starts: J check (+ DD) once, here
-            self._start_segment()
-        path = np.concatenate([self.local, self.waypoints[self.target + 1:]])
-        target = lookahead_point(path, xy, p.lookahead)
-        v, w = pure_pursuit(self.pose, target, goal_distance, self.v, self.dt, p)
-        self._publish_cmd(v, w)
-
-    # ----------------------------------------------------------------------------- stages
-    def _start_segment(self) -> None:
-        """Algorithm 1 lines 13-18 for the segment robot pose -> waypoints[target]."""
-        p = self.params
-        end = self.waypoints[self.target]
-        start = np.array(self.pose[:2]) if self.pose is not None else \
-            self.waypoints[self.target - 1]
-        local = straight_local_plan(start, end, self.points)
-        stage, c_before, c_after, ms = "straight", None, None, 0.0
-        if self.planner is not None:  # both ends stay: the pose and the planner's waypoint
-            t0 = time.perf_counter()
-            result = self.planner.local_stage(torch.as_tensor(start, dtype=torch.float32),
-                                              torch.as_tensor(end, dtype=torch.float32),
-                                              end_fixed=True, generator=self.generator)
-            ms = (time.perf_counter() - t0) * 1e3
-            c_before, c_after = result.c_before, result.c_after
-            stage = "dd" if result.dd_used else "j_check"
-            self.dd_calls += int(result.dd_used)
-            if result.dd_used or result.polished:
-                local = result.plan.numpy().astype(np.float64)
-                local[0], local[-1] = start, end
-        self.local = local
-        self.local_costs = (c_before, c_after)
+        """The control tick: the runner's bounded tick, cmd_vel, then what happened."""
+        t0 = time.perf_counter()
+        with self._lock:
+            cmd = self.runner.tick(self._now())
+            events = self.runner.pop_events()
+        self._publish_cmd(cmd.v, cmd.w)
+        ms = (time.perf_counter() - t0) * 1e3
         stamp = self.get_clock().now()
-        self._local_pub.publish(xy_to_path(local, p.global_frame, stamp.to_msg()))
-        self._fp_pub.publish(footprint_markers(
-            self.footprint, local, p.global_frame, stamp.to_msg(),
-            colliding=c_after is not None and c_after > p.c_th))
-        if self.planner is not None:
-            self._timing_pub.publish(timing_message(stage, ms, stamp.nanoseconds * 1e-9,
-                                                    c_before=c_before, c_after=c_after))
+        for kind, what in events:
+            self._on_event(kind, what, stamp)
+        if cmd.reason != self._last_reason and cmd.reason in ("blocked", "goal_reached"):
+            self.get_logger().info(f"control: {cmd.reason}")
+        self._last_reason = cmd.reason
+        self._timing_pub.publish(timing_message("control", ms, stamp.nanoseconds * 1e-9,
+                                                reason=cmd.reason))
 
-    def _stop(self) -> None:
-        if self.params is not None and hasattr(self, "_cmd_pub"):
-            self._publish_cmd(0.0, 0.0)
+    def _on_event(self, kind: str, what, stamp) -> None:
+        p = self.params
+        if kind == "error":
+            self.get_logger().error(what)
+            return
+        if kind == "goal_reached":
+            self.get_logger().info("goal reached")
+            return
+        result: SegmentResult = what
+        if kind == "blocked":
+            self.get_logger().warning(
+                "segment blocked: its local plan (after DD and polishing) is in collision by "
+                "the exact checker; stopped until a new plan arrives")
+        self._local_pub.publish(xy_to_path(result.plan, p.global_frame, stamp.to_msg()))
+        self._fp_pub.publish(footprint_markers(self.footprint, result.plan, p.global_frame,
+                                               stamp.to_msg(), colliding=not result.safe))
+        if result.c_before is not None:
+            self._timing_pub.publish(timing_message(
+                result.stage, result.ms, stamp.nanoseconds * 1e-9, c_before=result.c_before,
+                c_after=result.c_after, safe=result.safe))
 
     def _publish_cmd(self, v: float, w: float) -> None:
-        self.v = v
         msg = self._cmd_type()
         twist = msg.twist if isinstance(msg, TwistStamped) else msg
         twist.linear.x, twist.angular.z = float(v), float(w)
@@ -350,9 +355,13 @@ class LocalRefiner(Node):
             msg.header.frame_id = "base_link"
         self._cmd_pub.publish(msg)
 
+    def destroy_node(self) -> None:
+        self.runner.close()
+        super().destroy_node()
+
 
 def main(args=None) -> None:
-    spin_node(LocalRefiner, args)
+    spin_node(LocalRefiner, args, name="local_refiner", threads=3)
 
 
 if __name__ == "__main__":

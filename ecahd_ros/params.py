@@ -4,17 +4,21 @@ with a ParameterDescriptor, and reads them into a frozen dataclass whose ``__pos
 validates the values (raising EcahdError that names the parameter). The core then gets a plain
 dataclass and never sees rclpy.
 
-Parameters are read-only: they configure the node at start-up (``--ros-args -p name:=value`` or a
-YAML file). Float parameters accept integer overrides (``-p max_v:=1``).
+Parameters configure the node at start-up (``--ros-args -p name:=value`` or a YAML file). Most
+are read-only: ROS rejects a change with "read-only parameter". The few a node lists as dynamic
+(e.g. local_refiner's velocity limits) can be set at run time (``ros2 param set``): the new value
+is validated with the others (the same dataclass) and applied, or the change is rejected with the
+validation error as its reason, never silently ignored. Float parameters accept integer overrides
+(``-p max_v:=1``). :data:`SHARED` is the one home of the parameters several nodes declare.
 """
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from dataclasses import dataclass, fields
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, fields, replace
 from typing import TypeVar
 
-from rcl_interfaces.msg import ParameterDescriptor
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
 
 from ecahd_core.errors import EcahdError
@@ -32,13 +36,60 @@ class ParamSpec:
     description: str
 
 
-def declare_parameters(node: Node, specs: Sequence[ParamSpec]) -> None:
-    """Declare every parameter once, read-only, with its description. Floats are declared with
-    dynamic typing so an integer override is accepted (and checked in :func:`read_parameters`)."""
+def declare_parameters(node: Node, specs: Sequence[ParamSpec],
+                       dynamic: Sequence[str] = ()) -> None:
+    """Declare every parameter once with its description; read-only unless named in
+    ``dynamic``. Floats are declared with dynamic typing so an integer override is accepted
+    (and checked in :func:`read_parameters`)."""
     for spec in specs:
         node.declare_parameter(spec.name, spec.default, ParameterDescriptor(
-            description=spec.description, read_only=True,
+            description=spec.description, read_only=spec.name not in dynamic,
             dynamic_typing=isinstance(spec.default, float)))
+
+
+def _checked(spec: ParamSpec, value):
+    """``value`` of ``spec``'s type (ints accepted for floats), else EcahdError."""
+    if isinstance(spec.default, float):
+        if (isinstance(value, bool) or not isinstance(value, (int, float))
+                or not math.isfinite(value)):
+            raise EcahdError(f"parameter {spec.name} must be a finite number, got {value!r}")
+        return float(value)
+    if isinstance(spec.default, bool):
+        if not isinstance(value, bool):
+            raise EcahdError(f"parameter {spec.name} must be a bool, got {value!r}")
+    elif isinstance(spec.default, int):
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise EcahdError(f"parameter {spec.name} must be an integer, got {value!r}")
+    elif isinstance(spec.default, str) and not isinstance(value, str):
+        raise EcahdError(f"parameter {spec.name} must be a string, got {value!r}")
+    return value
+
+
+def on_parameter_change(node: Node, specs: Sequence[ParamSpec], get_current: Callable[[], T],
+                        apply: Callable[[T], None]) -> None:
+    """Validate run-time changes of dynamic parameters with the node's dataclass and hand the
+    new dataclass to ``apply``; a change that does not validate is rejected with its reason."""
+    by_name = {spec.name: spec for spec in specs}
+
+    def callback(changes) -> SetParametersResult:
+        current = get_current()
+        if current is None:
+            return SetParametersResult(successful=False, reason="node is not configured")
+        try:
+            values = {}
+            for change in changes:
+                spec = by_name.get(change.name)
+                if spec is None:
+                    continue  # e.g. use_sim_time: rclpy's own
+                values[change.name] = _checked(spec, change.value)
+            new = replace(current, **values) if values else current
+        except (EcahdError, TypeError) as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        if values:
+            apply(new)
+        return SetParametersResult(successful=True)
+
+    node.add_on_set_parameters_callback(callback)
 
 
 def read_parameters(node: Node, specs: Sequence[ParamSpec], cls: type[T]) -> T:
@@ -50,18 +101,7 @@ def read_parameters(node: Node, specs: Sequence[ParamSpec], cls: type[T]) -> T:
     for spec in specs:
         if spec.name not in names:
             raise EcahdError(f"parameter {spec.name} has no field in {cls.__name__}")
-        value = node.get_parameter(spec.name).value
-        if isinstance(spec.default, float):
-            if (isinstance(value, bool) or not isinstance(value, (int, float))
-                    or not math.isfinite(value)):
-                raise EcahdError(f"parameter {spec.name} must be a finite number, got {value!r}")
-            value = float(value)
-        elif isinstance(spec.default, bool):
-            if not isinstance(value, bool):
-                raise EcahdError(f"parameter {spec.name} must be a bool, got {value!r}")
-        elif isinstance(spec.default, int):
-            if isinstance(value, bool) or not isinstance(value, int):
-                raise EcahdError(f"parameter {spec.name} must be an integer, got {value!r}")
+        value = _checked(spec, node.get_parameter(spec.name).value)
         values[spec.name] = value
     return cls(**values)
 
@@ -89,3 +129,30 @@ def require_non_negative(params, *names: str) -> None:
 def robot_spec(robot: str, footprint: str) -> str:
     """The footprint spec for ``make_footprint``: the Nav2 string when set, else the preset."""
     return footprint.strip() or robot
+
+
+# The parameters several nodes declare, defined once (name -> spec).
+SHARED = {spec.name: spec for spec in [
+    ParamSpec("map_name", "maze2d-large", "name of the map on 'map' (checked against the "
+                                          "checkpoint with the grid's fingerprint)"),
+    ParamSpec("robot", "circle", "footprint preset: circle, quadruped, humanoid"),
+    ParamSpec("footprint", "", "Nav2 footprint polygon '[[x, y], ...]' [m]; overrides robot"),
+    ParamSpec("footprint_padding", 0.0, "[m] grows the footprint (Nav2 footprint_padding)"),
+    ParamSpec("global_frame", "map", "frame of goals, odometry poses and plans"),
+    ParamSpec("seed", 0, "seed of the sampler's torch.Generator (a seed reproduces the plans)"),
+    ParamSpec("torch_threads", 1, "torch.set_num_threads (and interop threads) of this "
+                                  "process: 1 keeps inference off the other cores"),
+]}
+
+
+def shared(*names: str) -> list[ParamSpec]:
+    """The :data:`SHARED` specs of ``names``, in that order."""
+    return [SHARED[name] for name in names]
+
+
+def make_robot(params):
+    """The Footprint of a params dataclass with robot, footprint and footprint_padding."""
+    from ecahd_core.footprint import make_footprint
+
+    return make_footprint(robot_spec(params.robot, params.footprint),
+                          padding=params.footprint_padding)

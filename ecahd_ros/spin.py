@@ -1,23 +1,73 @@
-"""The one ``main()`` body every node shares (ros2/examples, Jazzy): init, spin, stop on Ctrl-C
-or external shutdown, always destroy the node and shut down."""
+"""The one ``main()`` body every node shares (ros2/examples, Jazzy), made robust for a robot:
+
+- **Configuration that fails is visible.** A node constructor that raises (EcahdError: an unknown
+  robot, a parameter out of range, an unreadable model) ends the process at once with exit code
+  1 and one line on stderr, ``<node>: cannot configure: <reason>``, so ``ros2 launch`` and any
+  supervisor (systemd ``Restart=on-failure``, a launch ``respawn``) see the failure. We chose this
+  over lifecycle nodes: rclpy's lifecycle API adds a manual configure/activate dance that
+  ``ros2 run`` users do not expect, and a node that cannot configure has nothing useful to do.
+- **Nothing raised while spinning ends a node.** rclpy re-raises a callback's exception out of
+  ``spin_once`` (e.g. its time source given a ``/clock`` with a negative time); :func:`spin_forever`
+  logs it (each distinct message at most once per :data:`ERROR_LOG_PERIOD`) and keeps spinning.
+  Only Ctrl-C and an external shutdown end the loop.
+- **Threads on purpose.** ``threads`` > 1 spins a MultiThreadedExecutor so callbacks in separate
+  callback groups (a control timer and a planning worker) run side by side.
+"""
 from __future__ import annotations
 
+import sys
+import time
 from collections.abc import Callable
 
 import rclpy
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import (ExternalShutdownException, MultiThreadedExecutor,
+                             SingleThreadedExecutor)
 from rclpy.node import Node
 
+from ecahd_core.errors import EcahdError
 
-def spin_node(make_node: Callable[[], Node], args=None) -> None:
+ERROR_LOG_PERIOD = 5.0  # [s] the same exception text is logged at most once per period
+CONFIGURE_EXIT_CODE = 1  # exit status of a node that cannot configure
+
+
+def spin_forever(executor, logger, *, period: float = 0.1) -> None:
+    """Spin ``executor`` until Ctrl-C or shutdown; log any other exception and go on."""
+    last_logged: dict[str, float] = {}
+    context = executor.context
+    while context.ok():
+        try:
+            executor.spin_once(timeout_sec=period)
+        except (KeyboardInterrupt, ExternalShutdownException):
+            return
+        except Exception as exc:  # noqa: BLE001 (a robot's node must outlive one bad message)
+            text = f"{type(exc).__name__}: {exc}"
+            now = time.monotonic()
+            if now - last_logged.get(text, -ERROR_LOG_PERIOD) >= ERROR_LOG_PERIOD:
+                last_logged[text] = now
+                logger.error(f"exception while spinning (ignored, node keeps running): {text}")
+
+
+def spin_node(make_node: Callable[[], Node], args=None, *, name: str = "node",
+              threads: int = 1) -> None:
     """Create the node after ``rclpy.init`` and spin it until interrupted; ``destroy_node`` runs
-    in every case (nodes release their resources, e.g. close a bag, there)."""
+    in every case (nodes release their resources, e.g. close a bag, there). A node that cannot
+    configure exits with :data:`CONFIGURE_EXIT_CODE` and one line naming the reason."""
     rclpy.init(args=args)
-    node = make_node()
     try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        node = make_node()
+    except EcahdError as exc:
+        print(f"{name}: cannot configure: {exc}", file=sys.stderr, flush=True)
+        rclpy.try_shutdown()
+        sys.exit(CONFIGURE_EXIT_CODE)
+    except KeyboardInterrupt:
+        rclpy.try_shutdown()
+        return
+    executor = MultiThreadedExecutor(num_threads=threads) if threads > 1 else \
+        SingleThreadedExecutor()
+    executor.add_node(node)
+    try:
+        spin_forever(executor, node.get_logger())
     finally:
+        executor.shutdown(timeout_sec=1.0)
         node.destroy_node()
         rclpy.try_shutdown()

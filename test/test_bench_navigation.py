@@ -49,7 +49,7 @@ def test_table_has_our_variants_then_the_paper_columns():
     assert rows["Inference Time [s / episode] ↓"][3] != "-"  # the paper has it
     assert rows["Reached episodes"][3] == "-"  # the paper does not
     # the settings, limits and machine are stated
-    for text in ("0.1 s of sim time", "|v| <= 0.5 m/s", "|w| <= 1.5 rad/s", "Test CPU",
+    for text in ("0.05 s of sim time (20 Hz)", "|v| <= 0.5 m/s", "|w| <= 1.5 rad/s", "Test CPU",
                  "2 logical CPUs", "torch 2.x"):
         assert text in md
 

@@ -283,10 +283,8 @@ def test_bad_method_is_named():
         GlobalPlannerParams(**values)
 
 
-def test_bad_method_node_logs_and_does_not_start(ros_context):
-    node = GlobalPlanner(context=ros_context, parameter_overrides=[
-        Parameter("method", value="rrt")])
-    try:
-        assert node.params is None and not node.ready
-    finally:
-        node.destroy_node()
+def test_bad_method_node_raises_at_construction(ros_context):
+    # spin_node turns this into exit code 1 with one line (test_node_failures.py)
+    with pytest.raises(EcahdError, match="parameter method must be one of"):
+        GlobalPlanner(context=ros_context, parameter_overrides=[
+            Parameter("method", value="rrt")])

@@ -82,8 +82,8 @@ class Rig:
         msg.header.frame_id = "map"
         msg.pose.pose = pose_from_xy_yaw(x, y, yaw)
         self.odom_pub.publish(msg)
-        self.spin_until(lambda: self.node.pose is not None
-                        and self.node.pose[:2] == pytest.approx((x, y)))
+        self.spin_until(lambda: self.node.runner.pose is not None
+                        and self.node.runner.pose[:2] == pytest.approx((x, y)))
 
     def segment_timings(self) -> list[dict]:
         """The per-segment timing records (J check / DD), without the control ticks'."""
@@ -183,7 +183,7 @@ def test_every_control_tick_publishes_its_wall_time(rig):
     control = [json.loads(m.data) for m in r.timings if json.loads(m.data)["stage"] == "control"]
     assert len(control) >= len(cmds) - 1  # one per tick (a record follows its command)
     for c in control:
-        assert c["ms"] >= 0 and math.isfinite(c["stamp"]) and set(c) == {"stage", "ms", "stamp"}
+        assert c["ms"] >= 0 and math.isfinite(c["stamp"]) and set(c) == {"stage", "ms", "stamp", "reason"}
 
 
 def test_zero_without_a_plan(rig):

@@ -1,0 +1,524 @@
+"""The online Algorithm 1 (paper Sec. III-A) as two runtime classes driven by poses and a clock,
+with no rclpy: the ROS nodes only convert messages and call them (Nav2's controller_server /
+controller plugin split), and unit tests drive them with fake clocks and poses.
+
+:class:`GlobalRunner` (global_planner): when to ask the Sparse Diffusion planner for a plan.
+    A goal asks for a plan of horizon P^g at once; each time the robot comes within
+    ``waypoint_tolerance`` of the plan's next waypoint, the p-th replan asks for horizon
+    P^g - p (Algorithm 1 lines 2-11, ``replan`` "every_waypoint"); with ``replan`` "once" (ours,
+    and the Table III baselines A* and FD) one plan serves the whole goal. Beyond the paper, a
+    robot that reaches no waypoint for ``replan_timeout`` seconds replans from where it is, and
+    goals that arrive faster than ``min_plan_interval`` are coalesced (the latest wins), so the
+    planning work does not grow with the goal rate.
+
+:class:`LocalRunner` (local_refiner): Algorithm 1 lines 13-18 and the controller.
+    The global plan's segments W[k-1] -> W[k] (the first from the robot's pose when the plan
+    arrived) go to a ``refine`` function (J check, DD when c^l > c_th, polishing, the exact
+    check) that runs on a worker thread, ``prepare_ahead`` segments ahead of the robot, so the
+    control tick never waits for DD. :meth:`LocalRunner.tick` is bounded work: pure pursuit on
+    the current segment's local plan (resampled once, searched in a window around the robot's
+    progress), the next segment's local plan taken over when the robot reaches its waypoint
+    and the plan is ready. With nothing safe to follow (the segment not refined yet, or refined
+    but still in collision by the exact checker) the command is zero velocity.
+
+Poses are (x [m], y [m], yaw [rad]); plans are (P, 2) [m] in the global frame; ``now`` is a
+clock reading in seconds (sim time or wall time, the caller's choice).
+"""
+from __future__ import annotations
+
+import logging
+import math
+import threading
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from ecahd_core.controller import PathTracker, pure_pursuit
+from ecahd_core.errors import EcahdError, PlanningError
+
+log = logging.getLogger("ecahd.navigation")
+
+REPLAN_POLICIES = ("every_waypoint", "once")
+COORDINATE_LIMIT = 1e6  # [m] |x|, |y| beyond this is absurd whatever the map
+MAX_PLAN_POINTS = 100_000  # a plan with more poses is rejected
+PLAN_MARGIN = 1.0  # [m] plan points may lie this far outside the map's bounds
+SIMPLIFY_TOLERANCE = 0.005  # [m] interior plan points this close to the chord are dropped
+WAITING_END_DISTANCE = 0.05  # [m] at the end of the local plan with nothing next: stop
+
+
+# --------------------------------------------------------------------------- input checks
+def validate_pose(pose, what: str = "pose") -> tuple[float, float, float]:
+    """(x, y, yaw) finite and within COORDINATE_LIMIT, else PlanningError naming ``what``."""
+    x, y, yaw = (float(v) for v in pose)
+    if not all(math.isfinite(v) for v in (x, y, yaw)):
+        raise PlanningError(f"{what} is not finite: ({x}, {y}, {yaw})")
+    if abs(x) > COORDINATE_LIMIT or abs(y) > COORDINATE_LIMIT:
+        raise PlanningError(f"{what} ({x:g}, {y:g}) is absurdly far (> {COORDINATE_LIMIT:g} m)")
+    return x, y, yaw
+
+
+def validate_plan(xy, bounds: tuple[float, float, float, float] | None = None) -> np.ndarray:
+    """A plan (P, 2) [m] that can be followed, else PlanningError saying why: non-empty, at most
+    MAX_PLAN_POINTS, finite, and within ``bounds`` (xmin, ymin, xmax, ymax) [m] widened by
+    PLAN_MARGIN (or within COORDINATE_LIMIT without a map)."""
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    P = len(xy)
+    if P == 0:
+        raise PlanningError("plan has no poses")
+    if P > MAX_PLAN_POINTS:
+        raise PlanningError(f"plan has {P} poses, more than {MAX_PLAN_POINTS}")
+    if not np.all(np.isfinite(xy)):
+        bad = int(np.flatnonzero(~np.isfinite(xy).all(axis=1))[0])
+        raise PlanningError(f"plan pose {bad} is not finite: {xy[bad].tolist()}")
+    if bounds is None:
+        lo, hi = np.full(2, -COORDINATE_LIMIT), np.full(2, COORDINATE_LIMIT)
+    else:
+        lo = np.array(bounds[:2]) - PLAN_MARGIN
+        hi = np.array(bounds[2:]) + PLAN_MARGIN
+    outside = np.flatnonzero(((xy < lo) | (xy > hi)).any(axis=1))
+    if len(outside):
+        i = int(outside[0])
+        raise PlanningError(f"plan pose {i} ({xy[i, 0]:.4g}, {xy[i, 1]:.4g}) lies off the map "
+                            f"(x in [{lo[0]:.4g}, {hi[0]:.4g}], y in [{lo[1]:.4g}, {hi[1]:.4g}])")
+    return xy
+
+
+def simplify(xy: np.ndarray, tolerance: float = SIMPLIFY_TOLERANCE) -> np.ndarray:
+    """(P, 2) -> (Q, 2), Q <= P: consecutive duplicates and interior points within
+    ``tolerance`` [m] of the chord between their kept neighbours dropped (Ramer-Douglas-Peucker,
+    iterative), ends kept. A 10 000-pose straight plan becomes 2 points, so the number of
+    segments (each one J check) follows the plan's shape, not its sampling."""
+    keep_d = np.ones(len(xy), dtype=bool)
+    keep_d[1:] = np.linalg.norm(np.diff(xy, axis=0), axis=1) > 1e-9
+    xy = xy[keep_d]
+    if len(xy) <= 2:
+        return xy
+    keep = np.zeros(len(xy), dtype=bool)
+    keep[0] = keep[-1] = True
+    stack = [(0, len(xy) - 1)]
+    while stack:
+        i, j = stack.pop()
+        if j - i < 2:
+            continue
+        a, b = xy[i], xy[j]
+        seg = b - a
+        pts = xy[i + 1:j] - a
+        n = float(np.hypot(*seg))
+        d = (np.abs(seg[0] * pts[:, 1] - seg[1] * pts[:, 0]) / n if n > 1e-12
+             else np.linalg.norm(pts, axis=1))
+        k = int(np.argmax(d))
+        if d[k] > tolerance:
+            m = i + 1 + k
+            keep[m] = True
+            stack += [(i, m), (m, j)]
+    return xy[keep]
+
+
+# ----------------------------------------------------------------------------- global stage
+@dataclass(frozen=True, kw_only=True)
+class GlobalRunnerConfig:
+    """Settings of :class:`GlobalRunner` (units in brackets).
+
+    Attributes:
+        horizon: P^g, waypoints of a goal's first plan.
+        waypoint_tolerance: [m] reaching the next waypoint this close replans; the goal this
+            close is reached.
+        replan_timeout: [s] no waypoint reached for this long replans; 0 = never.
+        replan: "every_waypoint" (Algorithm 1) or "once" (one plan per goal).
+        min_plan_interval: [s] goals closer in time than this are coalesced.
+    """
+
+    horizon: int = 10
+    waypoint_tolerance: float = 0.3
+    replan_timeout: float = 5.0
+    replan: str = "every_waypoint"
+    min_plan_interval: float = 0.05
+
+    def __post_init__(self) -> None:
+        if self.horizon < 2:
+            raise EcahdError(f"horizon must be >= 2, got {self.horizon}")
+        if not self.waypoint_tolerance > 0:
+            raise EcahdError(f"waypoint_tolerance must be > 0 m, got {self.waypoint_tolerance}")
+        if not self.replan_timeout >= 0 or not self.min_plan_interval >= 0:
+            raise EcahdError("replan_timeout and min_plan_interval must be >= 0 s")
+        if self.replan not in REPLAN_POLICIES:
+            raise EcahdError(f"replan {self.replan!r} is not one of {list(REPLAN_POLICIES)}")
+
+
+@dataclass(frozen=True)
+class PlanRequest:
+    """Plan from ``start`` (2,) to ``goal`` (2,) [m] with ``horizon`` waypoints; ``reason`` is
+    "goal", "waypoint" or "timeout"."""
+
+    start: np.ndarray
+    goal: np.ndarray
+    horizon: int
+    reason: str
+
+
+class GlobalRunner:
+    """Algorithm 1's outer loop online (see the module docstring).
+
+    Call :meth:`set_goal` for a goal, :meth:`step` with each pose; a :class:`PlanRequest` it
+    returns is planned by the caller, who hands the result to :meth:`accept` (or reports a
+    failure with :meth:`fail`). :meth:`step` returns "reached" once when the goal is reached.
+    """
+
+    def __init__(self, config: GlobalRunnerConfig) -> None:
+        self.config = config
+        self.goal: np.ndarray | None = None  # (2,) [m]
+        self.waypoints: np.ndarray | None = None  # (P, 2) [m] the current plan
+        self.iteration = 0  # p of Algorithm 1: waypoints reached since the goal arrived
+        self._pending = False  # the goal still needs its first plan
+        self._last_plan = -math.inf  # [s] when the last plan was accepted
+        self._last_request = -math.inf  # [s] when the last goal plan was requested
+
+    @property
+    def active(self) -> bool:
+        return self.goal is not None
+
+    @property
+    def pending(self) -> bool:
+        """A goal waits for its first plan (e.g. coalesced in a burst)."""
+        return self.goal is not None and self._pending
+
+    def set_goal(self, goal) -> None:
+        """A new goal (2,) [m] pre-empts the current one."""
+        g = np.asarray(goal, dtype=np.float64).reshape(2)
+        if not np.all(np.isfinite(g)):
+            raise PlanningError(f"goal is not finite: {g.tolist()}")
+        self.goal, self.waypoints, self.iteration, self._pending = g, None, 0, True
+
+    def cancel(self) -> None:
+        self.goal, self.waypoints, self._pending = None, None, False
+
+    def step(self, xy, now: float) -> PlanRequest | str | None:
+        """The robot is at ``xy`` (2,) [m] at ``now`` [s]: a PlanRequest, "reached" or None."""
+        c = self.config
+        if self.goal is None:
+            return None
+        xy = np.asarray(xy, dtype=np.float64).reshape(2)
+        if not np.all(np.isfinite(xy)):
+            raise PlanningError(f"robot position is not finite: {xy.tolist()}")
+        if self._pending:
+            if now - self._last_request < c.min_plan_interval:
+                return None  # coalesce a burst of goals: the latest is planned next time
+            self._last_request = now
+            return PlanRequest(xy, self.goal.copy(), c.horizon, "goal")
+        if self.waypoints is None:
+            return None
+        if float(np.linalg.norm(xy - self.goal)) < c.waypoint_tolerance:
+            self.cancel()
+            return "reached"
+        if c.replan == "once":
+            return None
+        horizon = max(2, c.horizon - self.iteration)
+        if len(self.waypoints) > 2 and \
+                float(np.linalg.norm(xy - self.waypoints[1])) < c.waypoint_tolerance:
+            self.iteration += 1  # MoveAgent reached t^g_p[1]: replan with P^g - p
+            return PlanRequest(xy, self.goal.copy(), max(2, c.horizon - self.iteration),
+                               "waypoint")
+        if c.replan_timeout > 0 and now - self._last_plan > c.replan_timeout:
+            self._last_plan = now  # one timeout replan per period even if planning fails
+            return PlanRequest(xy, self.goal.copy(), horizon, "timeout")
+        return None
+
+    def accept(self, waypoints: np.ndarray, now: float) -> None:
+        """The plan (P, 2) [m] made for the last request."""
+        self.waypoints = np.asarray(waypoints, dtype=np.float64)
+        self._pending = False
+        self._last_plan = now
+
+    def fail(self) -> None:
+        """Planning for the goal failed for good (an unreachable goal): drop it."""
+        self.cancel()
+
+
+# ------------------------------------------------------------------------------ local stage
+@dataclass(frozen=True)
+class SegmentResult:
+    """One segment's local stage as the refiner follows it.
+
+    Attributes:
+        plan: (P^l, 2) [m] the local plan.
+        c_before, c_after: J's collision cost of the straight plan and of ``plan`` (None
+            without a map).
+        stage: "straight" (no map), "j_check" (J below c_th), "dd" (DD ran).
+        safe: the exact checker finds ``plan`` collision-free (True without a map).
+        ms: [ms] wall time of the whole local stage.
+        polished: polishing ran.
+    """
+
+    plan: np.ndarray
+    c_before: float | None = None
+    c_after: float | None = None
+    stage: str = "straight"
+    safe: bool = True
+    ms: float = 0.0
+    polished: bool = False
+
+
+@dataclass(frozen=True, kw_only=True)
+class LocalRunnerConfig:
+    """Settings of :class:`LocalRunner` (units in brackets; the node's parameters)."""
+
+    control_period: float = 0.05  # [s]
+    max_v: float = 0.5  # [m/s]
+    max_w: float = 1.5  # [rad/s]
+    max_accel: float = 1.0  # [m/s^2]
+    lookahead: float = 0.25  # [m]
+    waypoint_tolerance: float = 0.3  # [m]
+    goal_tolerance: float = 0.25  # [m]
+    stale_timeout: float = 1.0  # [s]
+    plan_timeout: float = 0.0  # [s], 0 = never
+    prepare_ahead: int = 2  # segments refined ahead of the one being followed
+
+    def __post_init__(self) -> None:
+        for name in ("control_period", "max_v", "max_w", "max_accel", "lookahead",
+                     "waypoint_tolerance", "goal_tolerance", "stale_timeout"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise EcahdError(f"{name} must be a finite number > 0, got {value!r}")
+        if not (math.isfinite(self.plan_timeout) and self.plan_timeout >= 0):
+            raise EcahdError(f"plan_timeout must be >= 0 s, got {self.plan_timeout!r}")
+        if self.prepare_ahead < 0:
+            raise EcahdError(f"prepare_ahead must be >= 0, got {self.prepare_ahead}")
+
+
+@dataclass(frozen=True)
+class Command:
+    """One control tick's output: v [m/s], w [rad/s] and why (``reason``: "follow",
+    "no_odom", "stale_odom", "no_plan", "plan_timeout", "goal_reached", "waiting" for a
+    segment still being refined, "blocked" by a segment the exact checker finds in collision)."""
+
+    v: float
+    w: float
+    reason: str
+
+
+RefineFn = Callable[[np.ndarray, np.ndarray], SegmentResult]
+
+
+def _run_now(fn: Callable[[], SegmentResult]) -> Future:
+    """A ``submit`` that runs the job at once (tests, and no worker thread)."""
+    future: Future = Future()
+    try:
+        future.set_result(fn())
+    except Exception as exc:  # noqa: BLE001 (reported through the future)
+        future.set_exception(exc)
+    return future
+
+
+class LocalRunner:
+    """The local stage and the controller online (see the module docstring).
+
+    Args:
+        config: LocalRunnerConfig.
+        refine: (start (2,), end (2,)) [m] -> SegmentResult; None follows straight segments.
+        submit: runs a job, returning a Future; None = a worker thread of this runner
+            (``synchronous=True``: run jobs inside the call that submits them).
+    Thread safety: :meth:`set_plan`, :meth:`set_pose`, :meth:`tick` are called from one
+    thread (or under the caller's lock); jobs finish on the worker.
+    """
+
+    def __init__(self, config: LocalRunnerConfig, refine: RefineFn | None = None, *,
+                 submit: Callable[[Callable[[], SegmentResult]], Future] | None = None,
+                 synchronous: bool = False) -> None:
+        self.config = config
+        self.refine = refine
+        self._pool = None
+        if submit is None and not synchronous:
+            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="local_stage")
+            submit = self._pool.submit
+        self._submit = submit or _run_now
+        self._lock = threading.Lock()
+        self.pose: tuple[float, float, float] | None = None
+        self.pose_time: float | None = None
+        self.waypoints: np.ndarray | None = None  # (P, 2) the simplified global plan
+        self.plan_time: float | None = None
+        self.generation = 0  # increases with every plan
+        self.segment = 0  # index of the waypoint the followed local plan ends at
+        self.tracker: PathTracker | None = None  # the followed local plan
+        self.current: SegmentResult | None = None
+        self._start: np.ndarray | None = None  # (2,) start of segment 1 of this plan
+        self._jobs: dict[int, Future] = {}  # segment k of this generation -> its job
+        self._reported: set[int] = set()  # segments of this generation whose result was reported
+        self.v = 0.0  # [m/s] the last command
+        self.events: list[tuple[str, object]] = []  # ("segment", SegmentResult), ("blocked",
+        #   SegmentResult), ("goal_reached", None), ("error", str): drained by the caller
+        self.dd_calls = 0
+
+    # ----------------------------------------------------------------------------- inputs
+    def set_pose(self, pose, now: float) -> None:
+        """The robot's (x, y, yaw) at ``now`` [s]; PlanningError if not finite."""
+        self.pose = validate_pose(pose, "odometry pose")
+        self.pose_time = now
+
+    def set_plan(self, waypoints, now: float,
+                 bounds: tuple[float, float, float, float] | None = None) -> None:
+        """A new global plan (P, 2) [m]: validated (see :func:`validate_plan`), simplified, its
+        first ``prepare_ahead`` + 1 segments submitted for refinement. An empty plan stops."""
+        xy = np.asarray(waypoints, dtype=np.float64).reshape(-1, 2)
+        if len(xy) == 0:
+            self.clear_plan()
+            return
+        xy = simplify(validate_plan(xy, bounds))
+        if len(xy) == 1:
+            xy = np.concatenate([xy, xy])
+        for job in self._jobs.values():
+            job.cancel()
+        self.generation += 1
+        self.waypoints, self.plan_time, self._jobs, self._reported = xy, now, {}, set()
+        self._start = (np.array(self.pose[:2]) if self.pose is not None else xy[0])
+        self._target = 1  # the next segment to take over (the followed one stays meanwhile)
+        self._submit_ahead()
+
+    def clear_plan(self) -> None:
+        for job in self._jobs.values():
+            job.cancel()
+        self.generation += 1
+        self.waypoints, self.tracker, self.current, self._jobs = None, None, None, {}
+        self._reported = set()
+
+    def reset_costs(self) -> None:
+        """The map changed: every segment of the current plan is refined again."""
+        if self.waypoints is not None:
+            self.set_plan(self.waypoints, self.plan_time if self.plan_time is not None else 0.0)
+
+    # ------------------------------------------------------------------------------ tick
+    def tick(self, now: float) -> Command:
+        """One control period: bounded work, never waits for a refinement."""
+        c = self.config
+        if self.pose is None:
+            return self._stop("no_odom")
+        if now - self.pose_time > c.stale_timeout:
+            return self._stop("stale_odom")
+        if self.waypoints is None:
+            return self._stop("no_plan")
+        if c.plan_timeout > 0 and now - self.plan_time > c.plan_timeout:
+            return self._stop("plan_timeout")
+        xy = np.array(self.pose[:2])
+        goal_distance = float(np.linalg.norm(self.waypoints[-1] - xy))
+        if goal_distance < c.goal_tolerance:
+            self.clear_plan()
+            self.events.append(("goal_reached", None))
+            return self._stop("goal_reached")
+        # take over the next segment: the first one of a new plan at once, a later one when
+        # the robot reaches the waypoint the followed one ends at
+        k = self._target
+        due = (self.tracker is None or self.segment != k - 1 or k == 1
+               or np.linalg.norm(self.waypoints[k - 1] - xy) < c.waypoint_tolerance)
+        if k < len(self.waypoints) and due:
+            result = self._result(k)
+            if result is not None:
+                if not result.safe:
+                    self.tracker = self.current = None  # nothing safe to follow
+                    self._target = k  # stays blocked until a new plan
+                    return self._stop("blocked")
+                self.tracker, self.current, self.segment = PathTracker(result.plan), result, k
+                self._target = k + 1
+                self._submit_ahead()
+        if self.tracker is None:
+            return self._stop("waiting")
+        target, remaining = self.tracker.lookahead(xy, c.lookahead)
+        if remaining < WAITING_END_DISTANCE and self.segment < len(self.waypoints) - 1:
+            return self._stop("waiting")  # at the end of the followed plan, the next not ready
+        v, w = pure_pursuit(self.pose, target, goal_distance, self.v, c.control_period, c)
+        self.v = v
+        return Command(v, w, "follow")
+
+    def pop_events(self) -> list[tuple[str, object]]:
+        events, self.events = self.events, []
+        return events
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+
+    # ---------------------------------------------------------------------------- helpers
+    def _stop(self, reason: str) -> Command:
+        self.v = 0.0
+        return Command(0.0, 0.0, reason)
+
+    def _segment_ends(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        start = self._start if k == 1 else self.waypoints[k - 1]
+        return start, self.waypoints[k]
+
+    def _submit_ahead(self) -> None:
+        """Jobs for segments _target .. _target + prepare_ahead not yet submitted."""
+        last = min(len(self.waypoints) - 1, self._target + self.config.prepare_ahead)
+        for k in range(self._target, last + 1):
+            if k not in self._jobs:
+                a, b = self._segment_ends(k)
+                self._jobs[k] = self._submit(self._job(a.copy(), b.copy()))
+
+    def _job(self, a: np.ndarray, b: np.ndarray) -> Callable[[], SegmentResult]:
+        refine = self.refine
+
+        def run() -> SegmentResult:
+            if refine is None:
+                return SegmentResult(plan=np.stack([a, b]))
+            return refine(a, b)
+        return run
+
+    def _result(self, k: int) -> SegmentResult | None:
+        """Segment k's result if its job is done (a failed job counts as blocked)."""
+        job = self._jobs.get(k)
+        if job is None or not job.done() or job.cancelled():
+            return None
+        first = k not in self._reported  # each result is reported once
+        self._reported.add(k)
+        if job.exception() is not None:
+            if first:
+                self.events.append(("error", f"local stage of segment {k} failed: "
+                                             f"{job.exception()}"))
+            a, b = self._segment_ends(k)
+            return SegmentResult(plan=np.stack([a, b]), safe=False)
+        result = job.result()
+        if first:
+            self.events.append(("segment" if result.safe else "blocked", result))
+            self.dd_calls += int(result.stage == "dd")
+        return result
+
+
+class SegmentRefiner:
+    """The ``refine`` of a LocalRunner: one segment's local stage
+    (:meth:`~ecahd_core.planner.HierarchicalPlanner.local_stage`: the straight LocalPlan, J,
+    DD above c_th, keep-better, polishing; both ends fixed) judged by the exact checker.
+
+    A local plan that starts in contact (the robot already touches a wall) is safe when it goes
+    no deeper than its start: it leads out.
+
+    Args:
+        planner: a HierarchicalPlanner (only its local stage is used).
+        grid: the GridMap the exact checker judges on; footprint: the robot.
+        generator: the DD sampler's torch.Generator (a seed reproduces the plans).
+    """
+
+    def __init__(self, planner, grid, footprint, *, generator=None) -> None:
+        self.planner, self.grid, self.footprint = planner, grid, footprint
+        self.generator = generator
+
+    def __call__(self, a: np.ndarray, b: np.ndarray) -> SegmentResult:
+        """a, b: (2,) [m] -> SegmentResult (plan (P^l, 2) [m] float64)."""
+        import time
+
+        import torch
+
+        from ecahd_core.collision import check_collision
+
+        t0 = time.perf_counter()
+        stage = self.planner.local_stage(torch.as_tensor(a, dtype=torch.float32),
+                                         torch.as_tensor(b, dtype=torch.float32),
+                                         end_fixed=True, generator=self.generator)
+        plan = stage.plan.detach().numpy().astype(np.float64)
+        plan[0], plan[-1] = a, b  # exact ends (the models work in float32)
+        report = check_collision(plan, self.footprint, self.grid)
+        safe = bool(report.collision_free or (
+            report.colliding[0] and float(report.depths[1:].max(initial=0.0))
+            <= float(report.depths[0]) + 1e-6))
+        return SegmentResult(plan=plan, c_before=stage.c_before, c_after=stage.c_after,
+                             stage="dd" if stage.dd_used else "j_check", safe=safe,
+                             ms=(time.perf_counter() - t0) * 1e3, polished=stage.polished)

@@ -1,0 +1,50 @@
+"""Torch's thread pools set on purpose (one home for every entry point: nodes, ``ecahd plan``,
+benchmarks, training).
+
+Two processes that each let torch use every core oversubscribe a 2-core robot computer badly
+(measured before this module: ``ecahd plan`` 0.41 s quiet, 35 s beside a training run). So
+inference defaults to 1 thread (:data:`INFERENCE_THREADS`) and training to all cores; both are
+flags / parameters. Interop threads are set too, once per process (torch allows it only before
+any parallel work), so a second call with another count changes the intra-op pool only.
+"""
+from __future__ import annotations
+
+import logging
+import os
+
+log = logging.getLogger("ecahd.threads")
+
+INFERENCE_THREADS = 1  # default of nodes, `ecahd plan` and the benchmarks
+
+
+def training_threads() -> int:
+    """The default for training: every core this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def set_torch_threads(n: int) -> int:
+    """torch.set_num_threads(n) (and interop threads, once); returns n. n must be >= 1."""
+    import torch
+
+    from ecahd_core.errors import EcahdError
+
+    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+        raise EcahdError(f"torch threads must be an integer >= 1, got {n!r}")
+    torch.set_num_threads(n)
+    try:
+        torch.set_num_interop_threads(n)
+    except RuntimeError:  # already set, or parallel work already started in this process
+        pass
+    log.debug("torch threads: %d intra-op, %d interop", torch.get_num_threads(),
+              torch.get_num_interop_threads())
+    return n
+
+
+def add_threads_argument(parser, default: int | None = INFERENCE_THREADS) -> None:
+    """``--threads N`` on a command (default ``default``; None: all cores, for training)."""
+    parser.add_argument("--threads", type=int, default=default,
+                        help="torch threads of this process (inference: 1 keeps a busy CPU "
+                             "from being oversubscribed; default for training: all cores)")
