@@ -1,0 +1,157 @@
+"""Tests of the stop / slowdown velocity filter (ecahd_core.collision_monitor).
+
+Common setup unless a test says otherwise: a 0.4 m x 0.4 m square robot (front edge at
+x = +0.2 m, sides at y = +-0.2 m) at the origin facing +x, default settings: horizon 1.0 s in
+0.1 s steps, stop within 0.02 m, slow down (x 0.3) within 0.3 m, points fresh.
+"""
+import math
+import time
+
+import numpy as np
+import pytest
+
+from ecahd_core.collision_monitor import CollisionMonitor, CollisionMonitorConfig
+from ecahd_core.errors import EcahdError
+from ecahd_core.footprint import make_footprint, polygon_footprint
+
+SQUARE = polygon_footprint([[0.2, 0.2], [-0.2, 0.2], [-0.2, -0.2], [0.2, -0.2]])
+ORIGIN = (0.0, 0.0, 0.0)
+
+
+def box_face(x: float) -> np.ndarray:
+    """(9, 2) points of a box face across the robot's path at x [m], y in [-0.2, 0.2]."""
+    return np.stack([np.full(9, x), np.linspace(-0.2, 0.2, 9)], axis=1)
+
+
+def wall_along_x(y: float) -> np.ndarray:
+    """(31, 2) points of a wall parallel to the robot's path at y [m], x in [-1, 2]."""
+    return np.stack([np.linspace(-1.0, 2.0, 31), np.full(31, y)], axis=1)
+
+
+def run(points, v, w=0.0, *, pose=ORIGIN, footprint=SQUARE, stamp=0.0, now=0.0, **config):
+    monitor = CollisionMonitor(footprint, CollisionMonitorConfig(**config))
+    return monitor.filter(pose, v, w, points, stamp, now)
+
+
+def test_stops_before_a_box_half_a_metre_ahead():
+    # box face at x = 0.7: 0.5 m in front of the front edge. At 0.5 m/s the gap after t seconds
+    # is 0.5 - 0.5 t: 0.05 m at t = 0.9 (> stop margin 0.02), 0 at t = 1.0 -> stop, ttc 1.0 s
+    result = run(box_face(0.7), 0.5)
+    assert (result.v, result.w, result.action) == (0.0, 0.0, "stop")
+    assert result.min_time_to_collision == pytest.approx(1.0)
+
+
+def test_slows_down_within_the_margin():
+    # at 0.4 m/s the gap 0.5 - 0.4 t never falls under 0.02 m within 1 s (0.1 m at t = 1), but
+    # it is <= 0.3 m from t = 0.5 s on -> slowdown to 0.3 x (0.4, 0.2) = (0.12, 0.06)
+    result = run(box_face(0.7), 0.4, 0.2)
+    assert result.action == "slowdown"
+    assert (result.v, result.w) == pytest.approx((0.12, 0.06))
+    assert result.min_time_to_collision == math.inf
+
+
+def test_driving_away_and_parallel_pass():
+    # reversing away from the box: the gap grows -> unchanged
+    result = run(box_face(0.7), -0.5)
+    assert (result.v, result.w, result.action) == (-0.5, 0.0, "none")
+    # a wall 0.6 m beside the centre line is 0.6 - 0.2 = 0.4 m from the side edge, outside the
+    # 0.3 m slowdown margin -> unchanged
+    assert run(wall_along_x(0.6), 0.5).action == "none"
+    # a wall 0.45 m from the centre line is 0.25 m from the side: slow down, never stop
+    result = run(wall_along_x(-0.45), 0.5)
+    assert result.action == "slowdown" and result.v == pytest.approx(0.15)
+
+
+def test_reverse_motion_stops_before_a_box_behind():
+    # box face at x = -0.7, 0.5 m behind the rear edge: reversing at 0.5 m/s closes the gap
+    # exactly as driving forward does in the first test; driving forward is fine
+    result = run(box_face(-0.7), -0.5)
+    assert result.action == "stop" and result.min_time_to_collision == pytest.approx(1.0)
+    assert run(box_face(-0.7), 0.5).action == "none"
+
+
+def test_turning_follows_the_arc():
+    # robot at (1, 1) facing +y, turning left at w = pi/2 rad/s with v = pi/4 m/s: a quarter
+    # circle of radius v / w = 0.5 m around (0.5, 1), ending at (0.5, 1.5) facing -x after 1 s.
+    # A box just beyond that end, at x = 0.5 - 0.2 (front edge), stops it late in the horizon;
+    # straight ahead (+y) the same command clears a box at (1, 1.8).
+    pose = (1.0, 1.0, math.pi / 2)
+    monitor = CollisionMonitor(SQUARE)
+    poses = monitor.simulate(pose, math.pi / 4, math.pi / 2)
+    assert poses.shape == (11, 3)
+    np.testing.assert_allclose(poses[-1], [0.5, 1.5, math.pi], atol=1e-12)
+    on_arc = np.array([[0.5 - 0.21, 1.5]])
+    result = monitor.filter(pose, math.pi / 4, math.pi / 2, on_arc, 0.0, 0.0)
+    assert result.action == "stop" and 0.5 < result.min_time_to_collision <= 1.0
+    straight_ahead = np.array([[1.0, 1.8]])
+    assert monitor.filter(pose, math.pi / 4, math.pi / 2, straight_ahead, 0.0, 0.0).action != "stop"
+
+
+def test_rotation_in_place_next_to_an_obstacle_stops():
+    # a 0.65 m x 0.30 m robot (quadruped preset) with a point 0.3 m to its left: 0.15 m from the
+    # side now, but turning sweeps the corners out to hypot(0.325, 0.15) = 0.358 m > 0.3 m, so
+    # the point ends up inside -> stop (Nav2's semantics: rotation is not let through)
+    quadruped = make_footprint("quadruped")
+    result = run(np.array([[0.0, 0.3]]), 0.0, 1.0, footprint=quadruped)
+    assert result.action == "stop" and result.w == 0.0
+
+
+def test_circle_footprint_uses_its_exact_radius():
+    # circle of radius 0.4 m, point 0.9 m ahead: gap 0.5 - 0.5 t -> stop at t = 1.0 s; at
+    # 0.25 m/s the gap ends at 0.25 m: slow down
+    circle = make_footprint("circle")
+    result = run(np.array([[0.9, 0.0]]), 0.5, footprint=circle)
+    assert result.action == "stop" and result.min_time_to_collision == pytest.approx(1.0)
+    assert run(np.array([[0.9, 0.0]]), 0.25, footprint=circle).action == "slowdown"
+
+
+def test_a_point_inside_the_footprint_stops_any_command():
+    result = run(np.array([[0.1, 0.0]]), -0.5)
+    assert result.action == "stop" and result.min_time_to_collision == 0.0
+
+
+def test_stale_or_missing_data_stops():
+    # points measured at t = 0, now t = 3 s > source_timeout 2 s -> stop, as Nav2 does
+    result = run(box_face(5.0), 0.5, stamp=0.0, now=3.0)
+    assert (result.action, result.v, result.min_time_to_collision) == ("stop", 0.0, 0.0)
+    assert "old" in result.reason
+    assert run(box_face(5.0), 0.5, stamp=None).action == "stop"
+    # source_timeout = 0 disables the check
+    assert run(box_face(5.0), 0.5, stamp=0.0, now=3.0, source_timeout=0.0).action == "none"
+
+
+def test_nan_points_are_ignored_and_min_points_counts():
+    pts = np.vstack([box_face(0.7), [[math.nan, 0.0], [0.3, math.nan]]])
+    assert run(pts, 0.5).action == "stop"
+    assert run(np.full((5, 2), math.nan), 0.5).action == "none"
+    assert run(np.empty((0, 2)), 0.5).action == "none"
+    # one point in the way is not enough when min_points = 2
+    assert run(np.array([[0.7, 0.0]]), 0.5, min_points=2).action == "none"
+
+
+def test_config_is_validated():
+    with pytest.raises(EcahdError, match="slowdown_ratio"):
+        CollisionMonitorConfig(slowdown_ratio=0.0)
+    with pytest.raises(EcahdError, match="stop_margin"):
+        CollisionMonitorConfig(stop_margin=0.5, slowdown_margin=0.3)
+    with pytest.raises(EcahdError, match="min_points"):
+        CollisionMonitorConfig(min_points=0)
+    assert CollisionMonitorConfig(time_to_collision=1.0, sim_dt=0.1).steps == 10
+    with pytest.raises(EcahdError, match="velocity"):
+        run(box_face(0.7), math.nan)
+
+
+@pytest.mark.parametrize("robot", ["circle", "quadruped"])
+def test_filter_speed_is_reported(robot):
+    # 360 points on a ring 0.9 m away, all within reach: print the time, assert nothing about it
+    a = np.linspace(-math.pi, math.pi, 360, endpoint=False)
+    ring = 0.9 * np.stack([np.cos(a), np.sin(a)], axis=1)
+    monitor = CollisionMonitor(make_footprint(robot))
+    times = []
+    for _ in range(50):
+        t0 = time.perf_counter()
+        result = monitor.filter(ORIGIN, 0.5, 0.3, ring, 0.0, 0.0)
+        times.append(time.perf_counter() - t0)
+    print(f"CollisionMonitor.filter ({robot}, 360 points, 10 steps): median "
+          f"{1e3 * float(np.median(times)):.3f} ms, action {result.action}")
+    assert result.action in ("slowdown", "stop")
