@@ -402,6 +402,25 @@ class HierarchicalPlanner:
         return LocalStage(plan=local, c_before=c, c_after=c_after, dd_used=used, polished=moved,
                           timings_ms=times)
 
+    def resample_segment(self, a: torch.Tensor, b: torch.Tensor, *, samples: int,
+                         generator: torch.Generator | None = None
+                         ) -> tuple[torch.Tensor, torch.Tensor]:
+        """The safety net's retry rule (ecahd_core.safety, ours): ``samples`` fresh DD plans from
+        a to b in one batch, each polished (when polishing is on) while still above c_th, both
+        ends fixed. a, b: (2,) [m] -> (candidates (samples, P^l, 2), c^l (samples,)), float32
+        on the CPU. Leaves :meth:`plan` and :meth:`local_stage` as they are."""
+        if self.dd is None:
+            raise EcahdError("resampling a local segment needs DD (dense.enabled is False)")
+        a = torch.as_tensor(a, dtype=torch.float32).reshape(1, 2).expand(samples, 2)
+        b = torch.as_tensor(b, dtype=torch.float32).reshape(1, 2).expand(samples, 2)
+        seg, cost = self.refine(a, b, generator=generator)  # (samples, P^l, 2), (samples,)
+        rough = cost > self.dense.c_th
+        if self.polishing and bool(rough.any()):
+            fixed = torch.zeros(self.dense.points, dtype=torch.bool)
+            fixed[0] = fixed[-1] = True
+            seg[rough], cost[rough] = self.polish(seg[rough], fixed)
+        return seg, cost
+
     def plan(self, start, goal, *, generator: torch.Generator | None = None) -> HierarchicalPlan:
         """Run Algorithm 1 from ``start`` to ``goal`` ((2,) [m] each)."""
         P_g = self.sparse.config.horizon

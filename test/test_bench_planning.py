@@ -33,3 +33,28 @@ def test_bench_defaults_follow_the_planner():
     assert PlanningBenchSettings().guidance_weight == DenseConfig().guidance_weight
     assert PlanningBenchSettings().guidance_space == DenseConfig().guidance_space
     assert PlanningBenchSettings().c_th == DenseConfig().c_th
+
+
+def test_safety_net_is_reported_beside_hd_and_leaves_its_numbers_alone():
+    from ecahd_core.bench.planning import (PlanningBenchSettings, format_markdown,
+                                           run_planning_benchmark)
+
+    runs = {}
+    for net in (False, True):
+        runs[net] = run_planning_benchmark(PlanningBenchSettings(
+            problems=2, robots=("circle",), methods=("hd",), ablation=False, replan="once",
+            safety_net=net),
+            progress=False)
+    for off, on in zip(runs[False].cells, runs[True].cells):
+        a, b = off.to_dict(), on.to_dict()
+        for key in ("success", "success_free", "collision_free", "collision_rate",
+                    "length_ratio", "dd_ratio"):
+            assert a[key] == b[key], key  # the net draws from its own generator
+        assert a["net_collision_free"] is None
+        assert b["net_collision_free"] == 100.0 - b["net_unsafe_rate"]
+        assert b["net_collision_free"] >= b["collision_free"]
+        assert b["net_time_ms_mean"] >= b["time_ms_mean"]
+        assert 0 <= b["net_fallback_rate"] <= 100 and 0 <= b["net_retry_rate"] <= 100
+    text = format_markdown(runs[True])
+    assert "safety net" in text and "fallback %" in text
+    assert "safety net" not in format_markdown(runs[False])

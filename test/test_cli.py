@@ -69,3 +69,49 @@ def test_shipped_nav2_map_matches_builtin():
     from pathlib import Path
     shipped = Path(__file__).resolve().parents[1] / "config" / "maps" / "maze2d-large.yaml"
     assert np.array_equal(load_nav2_yaml(shipped).occupied, builtin_map("maze2d-large").occupied)
+
+
+@pytest.mark.parametrize("replan", ["once", "every_waypoint"])
+def test_plan_ecahd_replan_policies_and_the_safety_net_record(tmp_path, replan):
+    rec = tmp_path / "p.json"
+    assert main(["plan", "--method", "ecahd", "--robot", "quadruped", "--replan", replan,
+                 "--json", str(rec), "--png", str(tmp_path / "p.png")]) == 0
+    r = json.loads(rec.read_text())
+    assert r["replan"] == replan and r["safety_net"] is True
+    assert r["rule"] in ("none", "retry", "fallback")
+    assert r["collision_free"] is True  # the net never hands out a colliding plan
+    assert isinstance(r["collision_free_before_net"], bool)
+    assert r["collision_free_before_net"] == (r["rule"] == "none")
+    assert isinstance(r["fallback_stretches"], list) and r["timings_ms"]["safety_net"] > 0
+
+
+def test_plan_sd_through_walls_is_repaired_by_the_fallback(tmp_path):
+    # SD alone, its waypoints joined by straight lines, clips a wall near the start for the
+    # circle robot (seed 0); the net splices A* in over that stretch
+    rec = tmp_path / "p.json"
+    args = ["plan", "--method", "sd", "--robot", "circle", "--json", str(rec),
+            "--png", str(tmp_path / "p.png")]
+    assert main(args + ["--no-safety-net"]) == 0
+    off = json.loads(rec.read_text())
+    assert off["rule"] == "off" and not off["collision_free"]
+    assert main(args) == 0
+    r = json.loads(rec.read_text())
+    assert r["rule"] == "fallback" and not r["collision_free_before_net"] and r["collision_free"]
+    traj = np.array(r["trajectory"])
+    for a, b in r["fallback_stretches"]:
+        assert 0 <= a < b < len(traj)
+    assert np.allclose(traj[0], [1.5, 1.5]) and np.allclose(traj[-1], [10.5, 7.5])
+
+
+def test_plan_without_a_safe_plan_exits_2_and_still_writes_the_record(tmp_path, capsys):
+    # goal (1.5, 1.1) in maze2d-large's first cell: free, but 0.1 m from the wall below, so the
+    # 0.4 m circle collides there whatever the path, and A* (clearance 0.4 m) cannot end there
+    rec, png = tmp_path / "p.json", tmp_path / "p.png"
+    code = main(["plan", "--method", "sd", "--robot", "circle", "--start", "1.5", "3.5",
+                 "--goal", "1.5", "1.1", "--json", str(rec), "--png", str(png)])
+    assert code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no safe plan" in err[0]
+    r = json.loads(rec.read_text())
+    assert r["rule"] == "unsafe" and not r["collision_free"] and r["unsafe_reason"]
+    assert png.stat().st_size > 10_000

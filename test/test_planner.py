@@ -126,3 +126,29 @@ def test_keep_better_never_accepts_a_dd_plan_costlier_than_the_straight_one(keep
             assert c_after <= c_before and not (through_wall and c_after > c_before)
         elif c_before > 0.0:
             assert through_wall  # the paper accepts DD's plan whatever it costs
+
+
+def test_resample_segment_gives_a_batch_of_dd_plans_between_fixed_ends():
+    planner = make_planner()
+    a, b = torch.tensor([1.5, 1.5]), torch.tensor([3.5, 2.5])  # the straight line clips a wall
+    gen = torch.Generator().manual_seed(0)
+    segs, cost = planner.resample_segment(a, b, samples=5, generator=gen)
+    assert segs.shape == (5, planner.dense.points, 2) and cost.shape == (5,)
+    assert torch.allclose(segs[:, 0], a.expand(5, 2), atol=1e-5)
+    assert torch.allclose(segs[:, -1], b.expand(5, 2), atol=1e-5)
+    assert torch.allclose(cost, planner.local_cost(segs, b.expand(5, 2)).float(), atol=1e-4)
+    assert len({tuple(s[1].tolist()) for s in segs}) > 1  # fresh samples, not one copy
+
+
+def test_safety_net_with_the_planner_leaves_a_collision_free_plan_as_it_is():
+    from ecahd_core.safety import SafetyNet
+
+    planner = make_planner()
+    gen = torch.Generator().manual_seed(0)
+    plan = planner.plan(np.array([1.5, 1.5]), np.array([10.5, 7.5]), generator=gen)
+    net = SafetyNet(GRID, make_footprint("circle"), planner=planner)
+    safe = net.apply(plan.trajectory, segments=plan.segments, generator=gen)
+    assert safe.safe and net.check(safe.path).collision_free
+    if safe.rule == "none":
+        assert np.array_equal(safe.path, plan.trajectory)
+    assert np.allclose(safe.path[0], [1.5, 1.5]) and np.allclose(safe.path[-1], [10.5, 7.5], atol=1e-5)

@@ -14,6 +14,13 @@ Metrics per cell:
 - ``length_ratio``: mean path length / A* path length (same clearance-respecting A*);
 - ``time_ms_mean`` / ``time_ms_p95``: planning wall time per problem;
 - ``dd_ratio``: share of local segments where DD fired (HD methods).
+
+The safety net (ours, ``ecahd_core.safety``; ``safety_net``, default on) is judged beside the HD
+cells, not instead of them: every HD / ECAHD path above is also handed to the net (its DD retries
+draw from their own generator, so the rows without the net keep their numbers) and the ``net_*``
+fields give the same problems with the net: collision-free and success & free after it, the share
+of plans where retries / the A* fallback acted or no safe plan existed, and the time per plan with
+the net (planning + net).
 """
 from __future__ import annotations
 
@@ -74,6 +81,8 @@ class PlanningBenchSettings:
     keep_better: bool = True  # DenseConfig's default; False = the paper's Algorithm 1
     replan: str = "every_waypoint"
     ablation: bool = True
+    safety_net: bool = True  # ours: judge HD / ECAHD with and without the net (ecahd_core.safety)
+    net_retries: int = 2  # SafetyNetConfig's default
 
 
 @dataclass
@@ -92,6 +101,14 @@ class CellResult:
     dd_ratio: float
     problems: int
     variant: str = ""  # Table II: cost mode (+ dilation)
+    # the same paths through the safety net (HD cells when settings.safety_net; None otherwise)
+    net_collision_free: float | None = None  # % after the net
+    net_success_free: float | None = None
+    net_retry_rate: float | None = None  # % of plans where DD retries made the plan free
+    net_fallback_rate: float | None = None  # % of plans with A* stretches spliced in
+    net_unsafe_rate: float | None = None  # % of plans with no safe plan
+    net_time_ms_mean: float | None = None  # planning + net
+    net_time_ms_p95: float | None = None
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -144,18 +161,26 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
     from ecahd_core.planner import (DenseConfig, FullDiffusion, HierarchicalPlanner, SparseConfig,
                                     SparseDiffusion)
     from ecahd_core.problems import make_problems
+    from ecahd_core.safety import SafetyNet, SafetyNetConfig
 
     grid = load_map(settings.map)
     problems = make_problems(grid, settings.problems, seed=settings.seed)
     cells, ablation, examples = [], [], {}
+    astars = {}  # robot -> AStarPlanner: one clearance mask per map and robot, reused
+
+    def astar_for(robot, fp):
+        if robot not in astars:
+            astars[robot] = AStarPlanner(grid, clearance_for_footprint(fp))
+        return astars[robot]
 
     def run_cell(method, guidance, robot, cost_config=None, variant=""):
         fp = make_footprint(robot)
         cc = cost_config or CostConfig(margin=settings.margin)
         cost = (cc.make_costmap(grid), torch.as_tensor(fp.points, dtype=torch.float32), cc)
         gen = torch.Generator().manual_seed(settings.sample_seed)
+        net = None
         if method == "astar":
-            astar = AStarPlanner(grid, clearance_for_footprint(fp))
+            astar = astar_for(robot, fp)
             plan_fn = lambda s, g: (astar.plan(s, g), None)  # noqa: E731
         elif method == "fd":
             fd = FullDiffusion(load_model("fd", grid, footprint=fp), guidance=guidance, cost=cost,
@@ -181,10 +206,19 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                                              keep_better=settings.keep_better),
                                          replan=settings.replan)
 
+                last = []  # the last HierarchicalPlan, for the net's retries
+
                 def plan_fn(s, g):
                     r = hd.plan(s, g, generator=gen)
+                    last[:] = [r]
                     return r.trajectory, r.dd_segments
+
+                if settings.safety_net and not variant:
+                    net = SafetyNet(grid, fp, SafetyNetConfig(retries=settings.net_retries),
+                                    planner=hd, astar=astar_for(robot, fp))
+                    net_gen = torch.Generator().manual_seed(settings.sample_seed + 1)
         paths, times, dd = [], [], []
+        net_paths, net_times, net_rules = [], [], []
         label = f"{METHOD_LABELS[method]}{' guided' if guidance else ''} {robot} {variant}".strip()
         for prob in tqdm(problems, desc=label, disable=not progress, leave=False):
             t0 = time.perf_counter()
@@ -193,10 +227,25 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
             paths.append(np.asarray(path, dtype=np.float64))
             if dd_segs is not None:
                 dd.extend(dd_segs)
+            if net is not None:  # the same path through the net, timed on its own
+                safe = net.apply(paths[-1], segments=last[0].segments, generator=net_gen)
+                net_paths.append(safe.path)
+                net_times.append(times[-1] + safe.time_ms)
+                net_rules.append(safe.rule)
         cell = _judge(paths, times, dd, problems, fp, grid, method=method, guidance=guidance,
                       robot=robot, variant=variant)
-        log.info("%s: success %.1f%%, collision-free %.1f%%, %.0f ms", label, cell.success,
-                 cell.collision_free, cell.time_ms_mean)
+        if net is not None:
+            after = _judge(net_paths, net_times, dd, problems, fp, grid, method=method,
+                           guidance=guidance, robot=robot)
+            rate = lambda rule: 100 * float(np.mean([r == rule for r in net_rules]))  # noqa: E731
+            cell.net_collision_free, cell.net_success_free = after.collision_free, after.success_free
+            cell.net_retry_rate, cell.net_fallback_rate = rate("retry"), rate("fallback")
+            cell.net_unsafe_rate = rate("unsafe")
+            cell.net_time_ms_mean, cell.net_time_ms_p95 = after.time_ms_mean, after.time_ms_p95
+            log.info("%s with the safety net: collision-free %.1f%%, retry %.1f%%, fallback "
+                     "%.1f%%, unsafe %.1f%%, %.0f ms", label, cell.net_collision_free,
+                     cell.net_retry_rate, cell.net_fallback_rate, cell.net_unsafe_rate,
+                     cell.net_time_ms_mean)
         return cell, paths
 
     for robot in settings.robots:
@@ -223,6 +272,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                "dd_retries": settings.dd_retries, "polish_steps": settings.polish_steps,
                "keep_better": settings.keep_better,
                "replan": settings.replan,
+               "safety_net": settings.safety_net, "net_retries": settings.net_retries,
                "torch": torch.__version__,
                "threads": torch.get_num_threads()}
     return PlanningBenchResult(cells=cells, ablation=ablation, examples=examples,
@@ -279,6 +329,24 @@ def format_markdown(r: PlanningBenchResult) -> str:
                      f"{x.success:.1f} | {x.success_final:.1f} | {x.success_free:.1f} | "
                      f"{x.collision_free:.1f} | {x.collision_rate:.4f} | {x.length_ratio:.3f} | "
                      f"{x.time_ms_mean:.1f} | {x.time_ms_p95:.1f} | {x.dd_ratio:.3f} |")
+    netted = [x for x in r.cells if x.net_collision_free is not None]
+    if netted:
+        lines += ["", f"The safety net (ours, beyond the paper; DD retries "
+                  f"{c.get('net_retries', '–')}, then A* for the offending stretches): the same "
+                  "paths without / with the net. Retry, fallback and unsafe: share of plans where "
+                  "that rule acted last.", "",
+                  "| method | guidance | robot | collision-free % | success & free % | retry % | "
+                  "fallback % | unsafe % | time mean ms | time p95 ms |",
+                  "|---|---|---|---|---|---|---|---|---|---|"]
+        for x in netted:
+            lines.append(
+                f"| {METHOD_LABELS[x.method]}{' (ECAHD)' if x.guidance else ''} | "
+                f"{'✓' if x.guidance else '×'} | {x.robot} | "
+                f"{x.collision_free:.1f} → {x.net_collision_free:.1f} | "
+                f"{x.success_free:.1f} → {x.net_success_free:.1f} | {x.net_retry_rate:.1f} | "
+                f"{x.net_fallback_rate:.1f} | {x.net_unsafe_rate:.1f} | "
+                f"{x.time_ms_mean:.1f} → {x.net_time_ms_mean:.1f} | "
+                f"{x.time_ms_p95:.1f} → {x.net_time_ms_p95:.1f} |")
     if r.ablation:
         lines += ["", "Table II ablation (ECAHD, circle robot): how J reads the cost map. "
                   "Ours / paper.", "",

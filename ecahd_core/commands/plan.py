@@ -9,6 +9,11 @@ Methods:
              followed by straight lines between its waypoints (``--guidance``: SD guided by J);
 - ``fd``     Diffuser-style full-sequence diffusion, 100 points (``--guidance``: guided by J);
 - ``astar``  A* with footprint clearance (the expert and classical reference).
+
+The safety net (``--safety-net``, default on; ``ecahd_core.safety``) judges the plan by the exact
+checker and repairs it when it collides: fresh DD samples for the colliding local segments
+(ECAHD / HD), then A* for the offending stretches only, drawn in orange. A plan it cannot make
+collision-free is written for diagnosis, labelled unsafe, and the command exits 2.
 """
 from __future__ import annotations
 
@@ -16,9 +21,12 @@ import argparse
 import json
 import logging
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from ecahd_core.commands import add_map_arguments
+from ecahd_core.errors import EcahdError
+from ecahd_core.viz import PlanFigure
 
 log = logging.getLogger("ecahd.plan")
 
@@ -28,12 +36,22 @@ DEFAULT_GOAL = (10.5, 7.5)
 SWEEP_SPACING = 0.25  # [m] between footprint outlines drawn along the path
 
 
+def add_replan_argument(p: argparse.ArgumentParser, default: str = "every_waypoint") -> None:
+    """``--replan``: HD / ECAHD's SD policy (HierarchicalPlanner's ``replan``), one definition
+    for ``ecahd plan`` and ``ecahd bench planning``."""
+    from ecahd_core.planner import REPLAN_POLICIES
+
+    p.add_argument("--replan", default=default, choices=REPLAN_POLICIES,
+                   help="HD: SD best-of-N at every waypoint (Algorithm 1) or once")
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_map_arguments(p)
     p.add_argument("--robot", default="circle",
                    help="footprint: circle | quadruped | humanoid | Nav2 polygon '[[x, y], ...]'")
     p.add_argument("--padding", type=float, default=0.0,
-                   help="[m] extra clearance around the footprint for A*")
+                   help="[m] extra clearance around the footprint for A* (and the safety "
+                        "net's A* fallback)")
     p.add_argument("--start", nargs=2, type=float, default=DEFAULT_START, metavar=("X", "Y"),
                    help="start position [m] in the map frame")
     p.add_argument("--goal", nargs=2, type=float, default=DEFAULT_GOAL, metavar=("X", "Y"),
@@ -54,6 +72,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-keep-better", action="store_true",
                    help="ECAHD/HD: accept DD's plan even when J finds the straight one cheaper "
                         "(the paper's rule)")
+    add_replan_argument(p)
+    p.add_argument("--safety-net", action=argparse.BooleanOptionalAction, default=True,
+                   help="ours, beyond the paper: judge the plan by the exact checker; when it "
+                        "collides, sample the colliding DD segments again, then splice in A* for "
+                        "the offending stretches; exit 2 when no safe plan exists")
     p.add_argument("--seed", type=int, default=0, help="sampling seed")
     p.add_argument("--sd-model", default=None, help="SD checkpoint (default: the shipped one)")
     p.add_argument("--dd-model", default=None, help="DD checkpoint (default: the shipped one)")
@@ -70,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
     from ecahd_core.dataset import resample_by_arclength
     from ecahd_core.footprint import make_footprint
     from ecahd_core.maps import load_map
-    from ecahd_core.viz import PlanFigure, save_figures
+    from ecahd_core.viz import save_figures
 
     grid = load_map(args.map, args.resolution)
     grid.require_free_space()
@@ -78,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
     start = grid.validate_point(args.start, "start")
     goal = grid.validate_point(args.goal, "goal")
 
-    candidates, dd_calls, dd_poses = [], 0, None
+    candidates, dd_calls, dd_poses, segments, hd, astar = [], 0, None, None, None, None
     if args.method == "astar":
         t0 = time.perf_counter()
         planner = AStarPlanner(grid, clearance_for_footprint(footprint, padding=args.padding))
@@ -88,9 +111,25 @@ def run(args: argparse.Namespace) -> int:
         waypoints = resample_by_arclength(path, args.waypoints)
         timings = {"inflate": (t1 - t0) * 1e3, "search": (t2 - t1) * 1e3,
                    "total": (t2 - t0) * 1e3}
+        astar = planner  # the net's fallback plans with the same clearance: reuse it
     else:
-        path, waypoints, candidates, timings, dd_calls, dd_poses = _plan_diffusion(
+        path, waypoints, candidates, timings, dd_calls, dd_poses, segments, hd = _plan_diffusion(
             args, grid, footprint, start, goal)
+    safe = None
+    if args.safety_net:
+        import torch
+
+        from ecahd_core.safety import SafetyNet, SafetyNetConfig
+
+        net = SafetyNet(grid, footprint, SafetyNetConfig(padding=args.padding), planner=hd,
+                        astar=astar)
+        safe = net.apply(path, segments=segments,
+                         generator=torch.Generator().manual_seed(args.seed + 1))
+        timings["safety_net"] = safe.time_ms
+        timings["total_with_net"] = timings["total"] + safe.time_ms
+        if safe.rule != "none":
+            candidates = [path] + list(candidates)  # the diffusion plan, drawn in grey
+            path = safe.path
     report = check_collision(path, footprint, grid)
     length = path_length(path)
     success = bool(np.min(np.linalg.norm(path - goal, axis=1)) <= 1.0)
@@ -98,16 +137,22 @@ def run(args: argparse.Namespace) -> int:
     poses = report.dense_poses
     step = max(1, int(round(SWEEP_SPACING / max(float(np.median(
         np.linalg.norm(np.diff(poses[:, :2], axis=0), axis=1))) if len(poses) > 1 else 1.0, 1e-9))))
+    rule = safe.rule if safe is not None else "off"
+    net_text = "" if safe is None else (
+        f"\nsafety net: {rule}" + (f" ({len(safe.stretches)} A* stretch(es) in orange)"
+                                   if safe.stretches else "")
+        + (": UNSAFE, no safe plan, do not follow" if not safe.safe else ""))
     title = (f"{args.method}{' + guidance' if _guided(args) and args.method != 'ecahd' else ''} "
              f"on {grid.name}, robot {footprint.name}: length {length:.2f} m, "
              f"{'collision-free' if report.collision_free else 'COLLIDES'}, "
-             f"{timings['total']:.1f} ms")
-    figure = PlanFigure(grid=grid, footprint=footprint, title=title, start=start, goal=goal,
+             f"{timings['total']:.1f} ms{net_text}")
+    figure = NetFigure(grid=grid, footprint=footprint, title=title, start=start, goal=goal,
                         trajectory=path, waypoints=waypoints,
                         sweep_poses=poses[::step] if dd_poses is None else dd_poses,
-                        colliding_poses=poses[report.colliding][::step], extra_paths=candidates)
+                        colliding_poses=poses[report.colliding][::step], extra_paths=candidates,
+                        fallback_paths=safe.stretch_paths() if safe is not None else [])
     png = save_figures([figure], args.png)
-    print(title)
+    print(title.replace("\n", ", "))
     print(f"figure: {png}")
     if args.json:
         record = {
@@ -118,11 +163,35 @@ def run(args: argparse.Namespace) -> int:
             "collision_free": bool(report.collision_free),
             "penetration_fraction": float(report.penetration_fraction),
             "timings_ms": timings, "dd_calls": dd_calls,
+            "replan": args.replan if args.method in ("ecahd", "hd") else None,
+            "safety_net": bool(args.safety_net), "rule": rule,
+            "collision_free_before_net": (bool(report.collision_free) if safe is None
+                                          else not safe.collided_before),
+            "fallback_stretches": [] if safe is None else [list(s) for s in safe.stretches],
+            "retried_segments": 0 if safe is None else safe.retried_segments,
+            "unsafe_reason": None if safe is None or safe.safe else safe.reason,
         }
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(record, indent=1))
         print(f"record: {args.json}")
+    if safe is not None and not safe.safe:
+        raise EcahdError(f"no safe plan: {safe.reason} (the plan written above is unsafe)")
     return 0
+
+
+@dataclass
+class NetFigure(PlanFigure):
+    """PlanFigure plus the safety net's A* stretches, drawn in orange."""
+
+    fallback_paths: list = field(default_factory=list)  # each (K, 2) [m]
+
+    def draw(self, ax) -> None:
+        super().draw(ax)
+        for i, p in enumerate(self.fallback_paths):
+            ax.plot(p[:, 0], p[:, 1], color="tab:orange", lw=2.4,
+                    label="A* fallback (safety net)" if i == 0 else None)
+        if self.fallback_paths and self.legend:
+            ax.legend(loc="best", fontsize=7, framealpha=0.8)
 
 
 def _guided(args) -> bool:
@@ -130,7 +199,8 @@ def _guided(args) -> bool:
 
 
 def _plan_diffusion(args, grid, footprint, start, goal):
-    """SD / FD / HD / ECAHD -> (path, waypoints, candidates, timings, dd_calls, dd_poses)."""
+    """SD / FD / HD / ECAHD -> (path, waypoints, candidates, timings, dd_calls, dd_poses,
+    local segments (HD / ECAHD, else None), the HierarchicalPlanner (else None))."""
     import numpy as np
     import torch
 
@@ -156,7 +226,8 @@ def _plan_diffusion(args, grid, footprint, start, goal):
         t0 = time.perf_counter()
         path = fd.plan(start, goal, generator=gen())
         ms = (time.perf_counter() - t0) * 1e3
-        return path, path[:: max(1, len(path) // 10)], [], {"fd": ms, "total": ms}, 0, None
+        return (path, path[:: max(1, len(path) // 10)], [], {"fd": ms, "total": ms}, 0, None,
+                None, None)
     sd = SparseDiffusion(load_model("sd", grid, path=args.sd_model, footprint=footprint,
                                     horizon=args.waypoints),
                          SparseConfig(num_candidates=args.candidates, horizon=args.waypoints,
@@ -167,10 +238,10 @@ def _plan_diffusion(args, grid, footprint, start, goal):
         plan = sd.plan(start, goal, generator=gen())
         others = [c for i, c in enumerate(plan.candidates) if i != plan.best]
         return (plan.waypoints, plan.waypoints, others, {"sd": plan.time_ms, "total": plan.time_ms},
-                0, None)
+                0, None, None, None)
     hd = HierarchicalPlanner(sd, load_model("dd", grid, path=args.dd_model, footprint=footprint),
                              costmap=cost[0], footprint_points=footprint.points, cost_config=cc,
-                             dense=DenseConfig(guidance=guided, **polish))
+                             dense=DenseConfig(guidance=guided, **polish), replan=args.replan)
     hd.plan(start, goal, generator=gen())  # warm-up
     plan = hd.plan(start, goal, generator=gen())
     # footprint outlines where DD fired
@@ -178,4 +249,4 @@ def _plan_diffusion(args, grid, footprint, start, goal):
     dd_poses = (np.concatenate([densify(seg, step=0.15) for seg in refined])
                 if refined else np.zeros((0, 3)))
     return (plan.trajectory, plan.global_plans[0], [], dict(plan.timings_ms), plan.dd_calls,
-            dd_poses)
+            dd_poses, plan.segments, hd)
