@@ -1,0 +1,242 @@
+"""The online Algorithm 1 runtimes (ecahd_core.navigation) driven by fake clocks and poses: no
+ROS, no models (a fake refine function), so each rule is pinned on its own."""
+import math
+import threading
+import time
+from concurrent.futures import Future
+
+import numpy as np
+import pytest
+
+from ecahd_core.controller import PathTracker
+from ecahd_core.errors import EcahdError, PlanningError
+from ecahd_core.navigation import (MAX_PLAN_POINTS, GlobalRunner, GlobalRunnerConfig,
+                                   LocalRunner, LocalRunnerConfig, PlanRequest, SegmentResult,
+                                   simplify, validate_plan)
+
+PLAN = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [2.0, 1.0]])
+
+
+# ------------------------------------------------------------------------------ GlobalRunner
+def test_goal_then_waypoints_shrink_the_horizon():
+    r = GlobalRunner(GlobalRunnerConfig(horizon=4, waypoint_tolerance=0.3))
+    r.set_goal((2.0, 1.0))
+    req = r.step((0.0, 0.0), 0.0)
+    assert isinstance(req, PlanRequest) and req.horizon == 4 and req.reason == "goal"
+    r.accept(PLAN, 0.0)
+    assert r.step((0.5, 0.0), 0.1) is None  # between waypoints
+    req = r.step((0.9, 0.05), 0.2)  # within 0.3 m of waypoint 1: P^g - 1
+    assert req.horizon == 3 and req.reason == "waypoint" and r.iteration == 1
+    r.accept(PLAN[1:], 0.2)
+    assert r.step((1.95, 1.0), 0.3) == "reached" and r.goal is None
+    assert r.step((1.95, 1.0), 0.4) is None
+
+
+def test_replan_once_and_timeout():
+    once = GlobalRunner(GlobalRunnerConfig(replan="once", replan_timeout=0.0))
+    once.set_goal((2.0, 1.0))
+    once.accept(PLAN, 0.0) if isinstance(once.step((0, 0), 0.0), PlanRequest) else None
+    assert once.step((0.95, 0.0), 0.1) is None  # waypoint reached: no replan with "once"
+    timed = GlobalRunner(GlobalRunnerConfig(replan_timeout=2.0))
+    timed.set_goal((2.0, 1.0))
+    timed.step((0.0, 0.0), 0.0)
+    timed.accept(PLAN, 0.0)
+    assert timed.step((0.2, 0.0), 1.9) is None
+    req = timed.step((0.2, 0.0), 2.1)  # stuck for > 2 s: replan from here, same horizon
+    assert req.reason == "timeout" and req.horizon == 10
+    assert timed.step((0.2, 0.0), 2.2) is None  # once per period
+
+
+def test_a_burst_of_goals_is_coalesced():
+    r = GlobalRunner(GlobalRunnerConfig(min_plan_interval=0.05))
+    requests = 0
+    for i in range(40):  # 40 goals in 0.4 s
+        r.set_goal((1.0 + 0.01 * i, 1.0))
+        if isinstance(r.step((0.0, 0.0), 0.01 * i), PlanRequest):
+            requests += 1
+    assert requests == 8  # one per 0.05 s
+    assert r.pending and r.goal == pytest.approx((1.39, 1.0))  # the latest goal waits for its plan
+
+
+@pytest.mark.parametrize("bad", [(math.nan, 0.0), (0.0, math.inf)])
+def test_non_finite_positions_raise(bad):
+    r = GlobalRunner(GlobalRunnerConfig())
+    with pytest.raises(PlanningError):
+        r.set_goal(bad)
+    r.set_goal((1.0, 1.0))
+    with pytest.raises(PlanningError, match="not finite"):
+        r.step(bad, 0.0)
+
+
+def test_bad_config_is_named():
+    with pytest.raises(EcahdError, match="replan"):
+        GlobalRunnerConfig(replan="sometimes")
+
+
+# ------------------------------------------------------------------------- plan checking
+def test_validate_plan_rejects_absurd_and_off_map_plans():
+    bounds = (0.0, 0.0, 10.0, 5.0)
+    with pytest.raises(PlanningError, match="pose 1 is not finite"):
+        validate_plan([[0, 0], [math.nan, 1]], bounds)
+    with pytest.raises(PlanningError, match="pose 1 .* off the map"):
+        validate_plan([[1, 1], [1e30, 1]], bounds)
+    with pytest.raises(PlanningError, match="off the map"):
+        validate_plan([[1, 1], [1e39, 1]])  # no map: the absolute limit
+    with pytest.raises(PlanningError, match="more than"):
+        validate_plan(np.zeros((MAX_PLAN_POINTS + 1, 2)), bounds)
+    np.testing.assert_array_equal(validate_plan([[1, 1], [10.5, 5.5]], bounds),
+                                  [[1, 1], [10.5, 5.5]])  # within the 1 m margin
+
+
+def test_simplify_keeps_the_shape_not_the_sampling():
+    line = np.linspace([0.0, 0.0], [10.0, 0.0], 10_000)
+    np.testing.assert_allclose(simplify(line), [[0, 0], [10, 0]])
+    corner = np.concatenate([np.linspace([0, 0], [1, 0], 50), np.linspace([1, 0], [1, 1], 50)])
+    np.testing.assert_allclose(simplify(corner), [[0, 0], [1, 0], [1, 1]])
+
+
+def test_path_tracker_searches_a_bounded_window():
+    tracker = PathTracker(np.array([[0.0, 0.0], [100.0, 0.0]]), window=2.0)
+    target, remaining = tracker.lookahead(np.array([0.2, 0.0]), 0.25)
+    np.testing.assert_allclose(target, [0.45, 0.0], atol=1e-9)
+    assert remaining == pytest.approx(99.8)
+    # the window is 2 m of arc (40 points), whatever the path's length
+    assert tracker._window == 40
+
+
+# ------------------------------------------------------------------------------ LocalRunner
+def runner(refine=None, **over):
+    config = LocalRunnerConfig(**{"control_period": 0.1, **over})
+    return LocalRunner(config, refine, synchronous=True)
+
+
+def test_follows_the_plan_within_the_limits_and_stops_at_the_goal():
+    r = runner()
+    r.set_pose((0.0, 0.0, 0.0), 0.0)
+    r.set_plan(PLAN, 0.0)
+    pose, t, reasons = np.array([0.0, 0.0, 0.0]), 0.0, []
+    for _ in range(200):  # integrate the unicycle with the commands
+        cmd = r.tick(t)
+        reasons.append(cmd.reason)
+        assert 0 <= cmd.v <= 0.5 + 1e-9 and abs(cmd.w) <= 1.5 + 1e-9
+        pose += [cmd.v * math.cos(pose[2]) * 0.1, cmd.v * math.sin(pose[2]) * 0.1, cmd.w * 0.1]
+        t += 0.1
+        r.set_pose(pose, t)
+        if cmd.reason == "goal_reached":
+            break
+    assert reasons[-1] == "goal_reached" and np.hypot(*(pose[:2] - PLAN[-1])) < 0.25
+    assert ("goal_reached", None) in r.pop_events()
+
+
+@pytest.mark.parametrize("reason,kwargs,t", [("no_odom", {}, 0.0),
+                                             ("stale_odom", {"stale_timeout": 0.5}, 1.0),
+                                             ("plan_timeout", {"plan_timeout": 0.5}, 0.9)])
+def test_zero_velocity_without_fresh_inputs(reason, kwargs, t):
+    r = runner(**kwargs)
+    if reason != "no_odom":
+        r.set_pose((0.0, 0.0, 0.0), 0.0)
+        r.set_plan(PLAN, 0.0)
+        if reason == "plan_timeout":
+            r.set_pose((0.0, 0.0, 0.0), t)  # fresh odometry, old plan
+    cmd = r.tick(t)
+    assert (cmd.v, cmd.w, cmd.reason) == (0.0, 0.0, reason)
+
+
+def test_a_blocked_segment_is_never_followed():
+    def refine(a, b):
+        return SegmentResult(plan=np.stack([a, b]), safe=False, c_before=5.0, c_after=5.0,
+                             stage="dd")
+
+    r = runner(refine)
+    r.set_pose((0.0, 0.0, 0.0), 0.0)
+    r.set_plan(PLAN, 0.0)
+    for t in (0.0, 0.1, 0.2):
+        cmd = r.tick(t)
+        assert (cmd.v, cmd.w, cmd.reason) == (0.0, 0.0, "blocked")
+    assert [k for k, _ in r.pop_events()] == ["blocked"]  # reported once
+
+
+def test_control_never_waits_for_the_local_stage():
+    """The refine job runs on the worker; ticks meanwhile give zero (nothing safe yet), then
+    the refined plan is followed."""
+    release = threading.Event()
+
+    def slow_refine(a, b):
+        release.wait(5.0)
+        return SegmentResult(plan=np.linspace(a, b, 4), c_before=0.0, c_after=0.0,
+                             stage="j_check")
+
+    r = LocalRunner(LocalRunnerConfig(control_period=0.1), slow_refine)
+    try:
+        r.set_pose((0.0, 0.0, 0.0), 0.0)
+        r.set_plan(PLAN, 0.0)
+        assert r.tick(0.0).reason == "waiting"  # returns at once although refine blocks
+        release.set()
+        for _ in range(500):
+            cmd = r.tick(0.1)
+            if cmd.reason == "follow":
+                break
+            time.sleep(0.01)
+        assert cmd.reason == "follow" and cmd.v > 0
+    finally:
+        release.set()
+        r.close()
+
+
+def test_segments_are_prepared_ahead_and_a_new_plan_cancels_them():
+    calls = []
+
+    def refine(a, b):
+        calls.append((tuple(a), tuple(b)))
+        return SegmentResult(plan=np.linspace(a, b, 4))
+
+    r = runner(refine, prepare_ahead=1)
+    r.set_pose((0.0, 0.0, 0.0), 0.0)
+    r.set_plan(PLAN, 0.0)
+    assert calls == [((0.0, 0.0), (1.0, 0.0)), ((1.0, 0.0), (1.0, 1.0))]
+    r.tick(0.0)  # takes over segment 1, prepares segment 3 (1 ahead of the next, 2)
+    assert calls[-1] == ((1.0, 1.0), (2.0, 1.0))
+
+    pending = []
+    deferred = LocalRunner(LocalRunnerConfig(), refine,
+                           submit=lambda fn: pending.append(Future()) or pending[-1])
+    deferred.set_pose((0.0, 0.0, 0.0), 0.0)
+    deferred.set_plan(PLAN, 0.0)
+    deferred.set_plan(PLAN[::-1], 0.1)  # supersedes: the first plan's jobs are cancelled
+    assert all(f.cancelled() for f in pending[:3])
+
+
+def test_a_failing_local_stage_is_reported_and_blocks():
+    def broken(a, b):
+        raise RuntimeError("boom")
+
+    r = runner(broken)
+    r.set_pose((0.0, 0.0, 0.0), 0.0)
+    r.set_plan(PLAN, 0.0)
+    assert r.tick(0.0).reason == "blocked"
+    events = r.pop_events()
+    assert events[0][0] == "error" and "boom" in events[0][1]
+
+
+def test_nan_odometry_and_absurd_plans_leave_the_state_alone():
+    r = runner()
+    r.set_pose((0.0, 0.0, 0.0), 0.0)
+    r.set_plan(PLAN, 0.0)
+    with pytest.raises(PlanningError, match="not finite"):
+        r.set_pose((math.nan, 0.0, 0.0), 0.1)
+    with pytest.raises(PlanningError):
+        r.set_plan([[0.0, 0.0], [1e30, 0.0]], 0.1, bounds=(0, 0, 10, 10))
+    assert r.pose == (0.0, 0.0, 0.0)
+    np.testing.assert_array_equal(r.waypoints, PLAN)
+
+
+def test_tick_work_does_not_grow_with_plan_length():
+    """A 10 000-pose wiggly plan: ticks search only their window (the tracker holds one
+    segment), so the points a tick looks at are bounded."""
+    xs = np.linspace(0, 50, 10_000)
+    wiggly = np.stack([xs, 0.02 * np.sin(xs * 40)], axis=1)
+    r = runner()
+    r.set_pose((0.0, 0.0, 0.0), 0.0)
+    r.set_plan(wiggly, 0.0)
+    r.tick(0.0)
+    assert len(r.tracker.points) < 50  # one segment of the simplified plan
