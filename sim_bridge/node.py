@@ -16,6 +16,19 @@ Parameters (read-only: they configure the simulator at start-up):
     camera_rate_hz (double, 1.0): [Hz of sim time] image rate.
     enable_stamped_cmd_vel (bool, false): cmd_vel is geometry_msgs/TwistStamped instead of Twist
         (Nav2 Jazzy's parameter name and default).
+    publish_scan (bool, true): publish a 2D LiDAR scan on ``scan``.
+    scan_rate_hz (double, 10.0): [Hz of sim time] scan rate (also the ``sim_obstacles`` rate).
+    scan_beams (int, 360): beams per scan, a full turn: angle_min = -pi, increment = 2 pi / beams.
+    scan_range_min, scan_range_max (double, 0.1, 8.0): [m] REP 117: a return closer than
+        range_min reads -inf, no return within range_max reads +inf.
+    scan_noise_std (double, 0.0): [m] Gaussian noise on every return.
+    scan_offset_x, scan_offset_y, scan_offset_yaw (double, 0.0, 0.0, 0.0): [m, m, rad] the fixed
+        base_link -> base_scan transform (where the LiDAR is mounted).
+    scan_frame_id (str, "base_scan"): header.frame_id of the scans.
+    seed (int, 0): seed of the simulator's random generator (scan noise).
+    obstacles_file (str, ""): scenario YAML of obstacles that are not on the map
+        (``ecahd_core.scenario``; '' = none). A bad entry, or an obstacle off the map or on the
+        start pose, is logged (one line naming it) and left out; the others load.
 
 Publishes:
     map (nav_msgs/OccupancyGrid; reliable, transient_local, depth 1): the simulated walls.
@@ -24,7 +37,19 @@ Publishes:
         base_link.
     clock (rosgraph_msgs/Clock; reliable, depth 10): simulated time, every step.
     collision (std_msgs/Bool; reliable, depth 10): every step, true when the robot's shape hit a
-        wall during that step.
+        wall or an obstacle during that step.
+    collision_detail (std_msgs/String; reliable, depth 10): only on steps with a contact, JSON
+        ``{"t": sim time [s], "kind": "wall" | "static_obstacle" | "moving_obstacle",
+        "obstacle": index in obstacles_file's list or null, "x": [m], "y": [m],
+        "contact_count": n}`` ("kind" is the first of moving, static, wall when a step hit
+        several), so a bag tells obstacle contacts from wall contacts.
+    scan (sensor_msgs/LaserScan; reliable, depth 10): at scan_rate_hz of sim time. There is no
+        TF tree here: a scan's pose is the ``odom`` pose at its stamp (the sim time of the step)
+        composed with the scan_offset_* transform; frame scan_frame_id. It sees walls and
+        obstacles, not the robot itself.
+    sim_obstacles (visualization_msgs/MarkerArray; reliable, depth 1): the true obstacles as
+        CUBE / CYLINDER markers (id = index in the scenario) in frame "map", 1 m high, at
+        scan_rate_hz; only when there are obstacles. Obstacles never appear on ``map``.
     camera/image_raw (sensor_msgs/Image rgb8, 256 px longer side; reliable, depth 1): optional.
 Subscribes:
     cmd_vel (geometry_msgs/Twist or TwistStamped; reliable, depth 10): linear.x, angular.z.
@@ -34,13 +59,17 @@ Subscribes:
 The loop runs from a steady wall-clock timer (so ``use_sim_time`` cannot stall it) with period
 1 / (rate_hz * realtime_factor); each tick advances simulated time by 1 / rate_hz. If a tick
 takes longer than its period, simulated time falls behind the wall clock; it never skips.
-Bad input (NaN velocities, a pose in a wall, an unknown map) is logged and ignored.
+Bad input while running (NaN velocities, a pose in a wall) is logged and ignored. A configuration
+that cannot work (a parameter out of range, an unknown map, an unreadable obstacles_file) raises
+EcahdError from the constructor, so ``ros2 run`` exits non-zero naming the reason.
 """
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
 
+import numpy as np
 import rclpy
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseWithCovarianceStamped, Twist, TwistStamped
@@ -48,15 +77,18 @@ from nav_msgs.msg import OccupancyGrid, Odometry
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
-from sensor_msgs.msg import Image
-from std_msgs.msg import Bool
+from sensor_msgs.msg import Image, LaserScan
+from std_msgs.msg import Bool, String
+from visualization_msgs.msg import Marker, MarkerArray
 
 from ecahd_core.errors import EcahdError
+from ecahd_core.scenario import Obstacle, read_scenario
 from ecahd_ros.conversions import grid_to_msg, pose_from_xy_yaw, yaw_from_quaternion
 from ecahd_ros.qos import MAP_QOS, STREAM_QOS, VIZ_QOS
-from ecahd_ros.params import ParamSpec, declare_parameters, read_parameters
+from ecahd_ros.params import (ParamSpec, declare_parameters, read_parameters, require,
+                              require_non_negative, require_positive)
 from ecahd_ros.spin import spin_node
-from sim_bridge.sim import MazeSim, SimConfig, SimError, SimState
+from sim_bridge.sim import WALL_HEIGHT, MazeSim, SimConfig, SimError, SimState, scan_angles
 
 CAMERA_SIZE = 256  # [px] longer side of the top-down image
 MAP_FRAME = "map"
@@ -80,6 +112,20 @@ PARAMETERS = [
     ParamSpec("publish_camera", False, "publish a top-down rgb8 image on camera/image_raw"),
     ParamSpec("camera_rate_hz", 1.0, "[Hz of sim time] top-down image rate"),
     ParamSpec("enable_stamped_cmd_vel", False, "cmd_vel is geometry_msgs/TwistStamped instead of Twist"),
+    ParamSpec("publish_scan", True, "publish a 2D LiDAR sensor_msgs/LaserScan on scan"),
+    ParamSpec("scan_rate_hz", 10.0, "[Hz of sim time] scan rate (and sim_obstacles marker rate)"),
+    ParamSpec("scan_beams", 360, "beams per scan over a full turn (angle_min -pi, "
+                                 "increment 2 pi / beams)"),
+    ParamSpec("scan_range_min", 0.1, "[m] closer returns read -inf (REP 117)"),
+    ParamSpec("scan_range_max", 8.0, "[m] no return within it reads +inf (REP 117)"),
+    ParamSpec("scan_noise_std", 0.0, "[m] standard deviation of Gaussian range noise"),
+    ParamSpec("scan_offset_x", 0.0, "[m] LiDAR position in base_link (base_link -> base_scan)"),
+    ParamSpec("scan_offset_y", 0.0, "[m] LiDAR position in base_link (base_link -> base_scan)"),
+    ParamSpec("scan_offset_yaw", 0.0, "[rad] LiDAR heading in base_link (base_link -> base_scan)"),
+    ParamSpec("scan_frame_id", "base_scan", "header.frame_id of the scans"),
+    ParamSpec("seed", 0, "seed of the simulator's random generator (scan noise)"),
+    ParamSpec("obstacles_file", "", "scenario YAML of obstacles that are not on the map "
+                                    "('' = none)"),
 ]
 
 
@@ -102,18 +148,42 @@ class SimBridgeParams:
     publish_camera: bool
     camera_rate_hz: float
     enable_stamped_cmd_vel: bool
+    publish_scan: bool
+    scan_rate_hz: float
+    scan_beams: int
+    scan_range_min: float
+    scan_range_max: float
+    scan_noise_std: float
+    scan_offset_x: float
+    scan_offset_y: float
+    scan_offset_yaw: float
+    scan_frame_id: str
+    seed: int
+    obstacles_file: str
 
     def __post_init__(self) -> None:
         for name in ("resolution", "rate_hz", "control_timeout", "max_v", "max_w",
                      "camera_rate_hz"):
             if not getattr(self, name) > 0:
                 raise SimError(f"parameter {name} must be > 0, got {getattr(self, name)}")
+        require_positive(self, "scan_rate_hz", "scan_beams")
+        require_non_negative(self, "scan_range_min", "scan_noise_std")
+        require(self.scan_range_max > self.scan_range_min, "scan_range_max",
+                self.scan_range_max, f"> scan_range_min ({self.scan_range_min})")
+        require(bool(self.scan_frame_id.strip()), "scan_frame_id", self.scan_frame_id,
+                "a frame name")
 
-    def sim_config(self) -> SimConfig:
+    @property
+    def scan_offset(self) -> tuple[float, float, float]:
+        """(x [m], y [m], yaw [rad]) of the LiDAR in base_link."""
+        return self.scan_offset_x, self.scan_offset_y, self.scan_offset_yaw
+
+    def sim_config(self, obstacles: tuple[Obstacle, ...] = ()) -> SimConfig:
         return SimConfig(map=self.map, resolution=self.resolution,
                          robot=self.footprint or self.robot, dt=1.0 / self.rate_hz,
                          max_v=self.max_v, max_w=self.max_w,
-                         start=(self.start_x, self.start_y, self.start_yaw))
+                         start=(self.start_x, self.start_y, self.start_yaw),
+                         obstacles=tuple(obstacles), seed=self.seed)
 
     @property
     def timer_period(self) -> float:
@@ -134,29 +204,70 @@ def stamp(t: float) -> Time:
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
+def obstacle_markers(sim: MazeSim, stamp_msg: Time) -> MarkerArray:
+    """The obstacles in the world now -> MarkerArray of CUBE / CYLINDER markers (frame map,
+    id = index in the scenario, 1 m high, standing on z = 0)."""
+    out = MarkerArray()
+    for index, ob, (x, y) in sim.obstacles:
+        m = Marker()
+        m.header.stamp, m.header.frame_id = stamp_msg, MAP_FRAME
+        m.ns, m.id, m.action = "sim_obstacles", index, Marker.ADD
+        m.pose = pose_from_xy_yaw(x, y, ob.yaw)
+        m.pose.position.z = WALL_HEIGHT / 2
+        if ob.shape == "box":
+            m.type = Marker.CUBE
+            m.scale.x, m.scale.y = ob.size
+        else:
+            m.type = Marker.CYLINDER
+            m.scale.x = m.scale.y = 2.0 * ob.radius
+        m.scale.z = WALL_HEIGHT
+        m.color.r, m.color.g, m.color.b, m.color.a = ((0.9, 0.5, 0.1, 0.8) if ob.moving
+                                                      else (0.6, 0.4, 0.2, 0.8))
+        out.markers.append(m)
+    return out
+
+
 class SimBridge(Node):
+    """Raises EcahdError (after releasing what it built) when the configuration cannot work."""
+
     def __init__(self, **kwargs) -> None:
         super().__init__("sim_bridge", **kwargs)
-        declare_parameters(self, PARAMETERS)
         self.params: SimBridgeParams | None = None
         self.sim: MazeSim | None = None
+        try:
+            self._configure()
+        except EcahdError:
+            self.destroy_node()
+            raise
+
+    def _configure(self) -> None:
+        declare_parameters(self, PARAMETERS)
         self.rejected_commands = 0  # cmd_vel messages ignored as malformed
         self._cmd = (0.0, 0.0)  # (v [m/s], w [rad/s])
         self._cmd_time: float | None = None  # [s of sim time] when _cmd arrived
         self._next_camera_t = 0.0
-        try:
-            self.params = read_sim_parameters(self)
-            self.sim = MazeSim(self.params.sim_config())
-        except EcahdError as exc:
-            self.get_logger().error(f"sim_bridge cannot start: {exc}")
-            return
-        p = self.params
+        self._next_scan_t = 0.0
+        self.params = p = read_sim_parameters(self)
+        obstacles: list[Obstacle] = []
+        if p.obstacles_file.strip():
+            obstacles, errors = read_scenario(p.obstacles_file)  # unreadable file: raises
+            for line in errors:
+                self.get_logger().error(f"{p.obstacles_file}: {line}; left out")
+        self.sim = MazeSim(p.sim_config(tuple(obstacles)))
+        for line in self.sim.rejected_obstacles:
+            self.get_logger().error(f"{p.obstacles_file}: {line}")
+        self._scan_angles, self._scan_increment = scan_angles(p.scan_beams)
         self._map_pub = self.create_publisher(OccupancyGrid, "map", MAP_QOS)
         self._odom_pub = self.create_publisher(Odometry, "odom", STREAM_QOS)
         self._clock_pub = self.create_publisher(ClockMsg, "clock", STREAM_QOS)
         self._collision_pub = self.create_publisher(Bool, "collision", STREAM_QOS)
+        self._detail_pub = self.create_publisher(String, "collision_detail", STREAM_QOS)
         self._camera_pub = (self.create_publisher(Image, "camera/image_raw", VIZ_QOS)
                             if p.publish_camera else None)
+        self._scan_pub = (self.create_publisher(LaserScan, "scan", STREAM_QOS)
+                          if p.publish_scan else None)
+        self._obstacles_pub = (self.create_publisher(MarkerArray, "sim_obstacles", VIZ_QOS)
+                               if self.sim.obstacles else None)
         cmd_type = TwistStamped if p.enable_stamped_cmd_vel else Twist
         self.create_subscription(cmd_type, "cmd_vel", self._on_cmd_vel, STREAM_QOS)
         self.create_subscription(PoseWithCovarianceStamped, "initialpose", self._on_initialpose,
@@ -167,7 +278,8 @@ class SimBridge(Node):
                                         clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(
             f"simulating {self.sim.footprint.name} on {self.sim.grid.name!r} "
-            f"({self.sim.n_wall_boxes} wall boxes) at {p.rate_hz:g} Hz sim time, "
+            f"({self.sim.n_wall_boxes} wall boxes, {len(self.sim.obstacles)} obstacles) at "
+            f"{p.rate_hz:g} Hz sim time, "
             f"realtime factor {p.realtime_factor:g}"
             f"{' (as fast as possible)' if p.realtime_factor <= 0 else ''}")
 
@@ -215,9 +327,34 @@ class SimBridge(Node):
         odom.twist.twist.linear.x, odom.twist.twist.angular.z = state.v, state.w
         self._odom_pub.publish(odom)
         self._collision_pub.publish(Bool(data=state.in_contact))
+        if state.in_contact:
+            self._detail_pub.publish(String(data=json.dumps({
+                "t": state.t, "kind": state.collision_kind, "obstacle": state.collision_obstacle,
+                "x": state.x, "y": state.y, "contact_count": state.contact_count})))
+        if state.t >= self._next_scan_t - 1e-9:
+            self._next_scan_t = state.t + 1.0 / self.params.scan_rate_hz
+            if self._scan_pub is not None:
+                self._scan_pub.publish(self._scan(state))
+            if self._obstacles_pub is not None:
+                self._obstacles_pub.publish(obstacle_markers(self.sim, now))
         if self._camera_pub is not None and state.t >= self._next_camera_t - 1e-9:
             self._next_camera_t = state.t + 1.0 / self.params.camera_rate_hz
             self._camera_pub.publish(self._image(state))
+
+    def _scan(self, state: SimState) -> LaserScan:
+        p = self.params
+        ranges = self.sim.scan(p.scan_offset, p.scan_beams, p.scan_range_min, p.scan_range_max,
+                               noise_std=p.scan_noise_std)
+        msg = LaserScan()
+        msg.header.stamp, msg.header.frame_id = stamp(state.t), p.scan_frame_id
+        msg.angle_min = float(self._scan_angles[0])
+        msg.angle_max = float(self._scan_angles[-1])
+        msg.angle_increment = self._scan_increment
+        msg.time_increment = 0.0  # every beam at the stamp
+        msg.scan_time = 1.0 / p.scan_rate_hz
+        msg.range_min, msg.range_max = p.scan_range_min, p.scan_range_max
+        msg.ranges = ranges.astype(np.float32).tolist()
+        return msg
 
     def _image(self, state: SimState) -> Image:
         rgb = self.sim.render_topdown(CAMERA_SIZE)

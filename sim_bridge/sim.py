@@ -3,10 +3,29 @@ with real contacts computed by PyBullet (no rclpy here; ``sim_bridge.node`` wrap
 
 World: the map frame of ``ecahd_core.maps`` (x along the grid columns, y up, metres). Every run of
 occupied cells becomes a wall box 1 m high (runs with the same columns in consecutive rows are
-merged into one box), and four boxes fence the map's bounds, so the robot can never leave the map.
+merged into one box; unknown cells count as occupied, as ``GridMap.occupied`` says by default),
+and four boxes fence the map's bounds, so the robot can never leave the map. PyBullet keeps only
+the first 16 children of a compound shape (``createCollisionShapeArray`` drops the rest
+silently), so the boxes are grouped, 16 at a time in ~2 m tiles, into static bodies; a label
+image (cell -> body) tells a contact query which few bodies are near the robot. A 60 m x 60 m
+building at 0.03 m/cell (2000 x 2000 cells, ~35 000 boxes) builds in about a second.
 The robot body is the footprint extruded 0.5 m: a cylinder for circles, a box for axis-aligned
 rectangles (quadruped, humanoid), the convex hull of the outline for any other polygon (a
 non-convex polygon is over-approximated by its hull; Bullet inflates hulls by its 1 mm margin).
+
+Obstacles that are not on the map (``SimConfig.obstacles``, from an ``ecahd_core.scenario``
+file) are static boxes / cylinders 1 m high; moving ones are kinematic: before each step's motion
+their pose is reset to ``Obstacle.position(t)`` at the step's end time, and they do not push the
+robot (an overlap is a contact, and the robot may move out of it). An obstacle that overlaps the
+robot's start pose deeper than ``contact_tolerance``, or whose centre (or a path point) is off the
+map, is left out with one line in ``MazeSim.rejected_obstacles``.
+
+LiDAR (``MazeSim.scan``): a planar fan of rays cast with ``rayTestBatch`` (at most
+:data:`RAY_BATCH` rays per call) at height :data:`SCAN_Z` from the robot's pose composed with a
+mounting offset. The robot's own body is in a collision filter group the rays skip. Ranges follow
+REP 117: ``inf`` for no return within range_max, ``-inf`` for a return closer than range_min.
+A sensor origin inside a wall or obstacle does not see that body (Bullet's rays ignore a shape
+they start in).
 
 Motion (D4RL maze2d's point mass, made a unicycle): ``step(v, w)`` clamps the command to
 ``|v| <= max_v``, ``|w| <= max_w`` and integrates the exact closed form over ``dt``::
@@ -26,7 +45,9 @@ move out). The penetrating part of a move is rejected, the rest is kept: the rob
 the commanded arc as far as it can (bisection), then slides along x or y with the remaining
 displacement (maze walls are axis-aligned), keeping the new heading if that fits, else the old
 one. A step is ``in_contact`` when part of its move was rejected or the final shape touches a
-wall; ``contact_count`` counts such steps since the last reset.
+wall or obstacle; ``contact_count`` counts such steps since the last reset, and
+``collision_kind`` says what was hit ("moving_obstacle" before "static_obstacle" before "wall"
+when a step hit several), so a benchmark can count obstacle contacts apart from wall contacts.
 """
 from __future__ import annotations
 
@@ -39,6 +60,7 @@ import numpy as np
 from ecahd_core.errors import EcahdError, SimError
 from ecahd_core.footprint import Footprint, make_footprint
 from ecahd_core.maps import DEFAULT_RESOLUTION, GridMap, load_map
+from ecahd_core.scenario import Obstacle
 
 logger = logging.getLogger(__name__)
 
@@ -49,6 +71,16 @@ FENCE_THICKNESS = 1.0  # [m] walls around the map bounds
 BISECTION_STEPS = 6  # advance-to-contact precision: sub-step length / 2**6
 D4RL_MAX_EPISODE_STEPS = 800  # maze2d-large's episode length
 D4RL_GOAL_RADIUS = 0.5  # [m] sparse reward 1 within this distance of the goal
+MAX_COMPOUND_SHAPES = 16  # children PyBullet keeps in one createCollisionShapeArray
+WALL_TILE = 2.0  # [m] wall boxes are grouped into bodies per tile of this size
+RAY_BATCH = 8192  # rays per rayTestBatch call (PyBullet refuses more than 16384)
+SCAN_Z = 0.3  # [m] height of the LiDAR plane: inside the walls, obstacles and robot body
+ROBOT_FILTER_GROUP = 0x40  # collision filter group of the robot body, which rays skip
+RAY_FILTER_MASK = 0x3F  # Bullet's default, static, kinematic, debris, sensor, character groups
+
+# what a contact was with (SimState.collision_kind), most informative first
+MOVING_OBSTACLE, STATIC_OBSTACLE, WALL = "moving_obstacle", "static_obstacle", "wall"
+COLLISION_KINDS = (MOVING_OBSTACLE, STATIC_OBSTACLE, WALL)
 
 # drawing colours, RGB
 _FREE_RGB = (255, 255, 255)
@@ -56,8 +88,7 @@ _WALL_RGB = (64, 64, 64)
 _ROBOT_RGB = (40, 90, 220)
 _CONTACT_RGB = (220, 40, 40)
 _HEADING_RGB = (255, 200, 0)
-
-
+_OBSTACLE_RGB = (150, 100, 40)
 
 
 # ------------------------------------------------------------------------------ configuration
@@ -74,6 +105,8 @@ class SimConfig:
         max_w: [rad/s] limit on |angular velocity|.
         start: (x [m], y [m], yaw [rad]) pose after construction.
         contact_tolerance: [m] penetration depth still accepted as a legal pose.
+        obstacles: obstacles that are not on the map (``ecahd_core.scenario``).
+        seed: seed of the simulator's random generator (scan noise).
     """
 
     map: str = "maze2d-large"
@@ -84,6 +117,8 @@ class SimConfig:
     max_w: float = 2.0
     start: tuple[float, float, float] = (1.5, 1.5, 0.0)
     contact_tolerance: float = 0.005
+    obstacles: tuple[Obstacle, ...] = ()
+    seed: int = 0
 
     def __post_init__(self) -> None:
         for name in ("dt", "max_v", "max_w"):
@@ -107,8 +142,12 @@ class SimState:
             move was blocked).
         w: [rad/s] angular velocity of the step (same rule).
         t: [s] simulated time since the simulator was built (a reset does not rewind it).
-        in_contact: part of this step's move was rejected, or the shape touches a wall.
+        in_contact: part of this step's move was rejected, or the shape touches a wall or an
+            obstacle.
         contact_count: steps with ``in_contact`` since the last reset.
+        collision_kind: what this step's contact was with: "moving_obstacle",
+            "static_obstacle" or "wall" (the first of these when several), None without contact.
+        collision_obstacle: index in ``SimConfig.obstacles`` of the obstacle hit, else None.
     """
 
     x: float
@@ -119,6 +158,8 @@ class SimState:
     t: float
     in_contact: bool
     contact_count: int
+    collision_kind: str | None = None
+    collision_obstacle: int | None = None
 
 
 # ------------------------------------------------------------------------------- kinematics
@@ -185,14 +226,54 @@ def _quaternion(yaw: float) -> tuple[float, float, float, float]:
     return 0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0)
 
 
+@dataclass(frozen=True)
+class Contact:
+    """One body the robot shape touches: depth [m] of the overlap (0 when touching), what it is
+    (WALL, STATIC_OBSTACLE, MOVING_OBSTACLE) and the obstacle's index (None for walls)."""
+
+    depth: float
+    kind: str
+    obstacle: int | None = None
+
+
+def scan_angles(beams: int, angle_min: float = -math.pi,
+                angle_max: float | None = None) -> tuple[np.ndarray, float]:
+    """Beam angles [rad] of a scan -> ((beams,) angles, increment), as LaserScan lays them out:
+    angle_min + i * increment. angle_max None: a full turn, angle_max = angle_min + 2 pi -
+    increment."""
+    if not (isinstance(beams, (int, np.integer)) and beams >= 1):
+        raise SimError(f"scan beams must be an integer >= 1, got {beams!r}")
+    if angle_max is None:
+        increment = 2.0 * math.pi / beams
+    elif beams == 1:
+        increment = 0.0
+    else:
+        increment = (angle_max - angle_min) / (beams - 1)
+    if not (math.isfinite(angle_min) and math.isfinite(increment) and increment >= 0):
+        raise SimError(f"scan angles must be finite with angle_max >= angle_min, got "
+                       f"[{angle_min}, {angle_max}]")
+    return angle_min + increment * np.arange(beams), float(increment)
+
+
+def _collision_kind(contacts) -> tuple[str | None, int | None]:
+    """(kind, obstacle index) of the most informative contact (COLLISION_KINDS order)."""
+    best = None
+    for c in contacts:
+        if best is None or COLLISION_KINDS.index(c.kind) < COLLISION_KINDS.index(best.kind):
+            best = c
+    return (None, None) if best is None else (best.kind, best.obstacle)
+
+
 # ---------------------------------------------------------------------------------- the sim
 class MazeSim:
-    """A footprint moving through the walls of a GridMap, one PyBullet DIRECT client of its own.
+    """A footprint moving through the walls of a GridMap (and obstacles that are not on it), one
+    PyBullet DIRECT client of its own.
 
     Usage::
 
         sim = MazeSim(SimConfig(map="maze2d-large", robot="quadruped", dt=0.02))
         state = sim.step(0.5, 0.0)   # SimState
+        ranges = sim.scan(beams=360, range_max=8.0)   # (360,) [m]
         image = sim.render_topdown(256)
         sim.close()
     """
@@ -206,40 +287,61 @@ class MazeSim:
         self.grid.require_free_space()
         self.footprint: Footprint = make_footprint(config.robot)
         self._client = BulletClient(connection_mode=pybullet.DIRECT)
-        self._walls, self.n_wall_boxes = self._build_walls(pybullet)
+        self._rng = np.random.default_rng(config.seed)
+        self._build_walls(pybullet)
         self._robot = self._build_robot(pybullet)
         # longest sub-step [m] that cannot skip a wall cell or the robot's own width
         self._max_substep = 0.5 * min(self.grid.resolution, self.footprint.inscribed_radius)
         self._reach = self.footprint.circumscribed_radius
         self._backgrounds: dict[int, np.ndarray] = {}
         self._total_steps = 0  # since construction: t = total_steps * dt, without drift
-        self._pose = (0.0, 0.0, 0.0)
+        self._pose = (float(config.start[0]), float(config.start[1]), float(config.start[2]))
         self._state: SimState | None = None
+        self.rejected_obstacles: list[str] = []
+        self._obstacles: list[tuple[int, Obstacle, int]] = []  # (scenario index, obstacle, body)
+        self._obstacle_xy = np.zeros((0, 2))  # (M, 2) current centres [m]
+        self._build_obstacles(pybullet)
         self.reset(*config.start)
 
     # ------------------------------------------------------------------------ construction
-    def _build_walls(self, pybullet) -> tuple[int, int]:
-        """One static body whose compound shape holds every wall box and the fence."""
+    def _compound_body(self, pybullet, half_extents, centres) -> int:
+        shape = self._client.createCollisionShapeArray(
+            shapeTypes=[pybullet.GEOM_BOX] * len(half_extents), halfExtents=half_extents,
+            collisionFramePositions=centres)
+        return self._client.createMultiBody(baseMass=0, baseCollisionShapeIndex=shape)
+
+    def _build_walls(self, pybullet) -> None:
+        """Static bodies of at most MAX_COMPOUND_SHAPES wall boxes each (boxes of one ~2 m tile
+        together), the fence as one more body, and the (H, W) cell -> wall body label image."""
         g, res = self.grid, self.grid.resolution
         ox, oy = g.origin
-        half_extents, centres = [], []
-        for r0, c0, r1, c1 in wall_rectangles(g.occupied):
-            half_extents.append([(c1 - c0) * res / 2, (r1 - r0) * res / 2, WALL_HEIGHT / 2])
-            centres.append([ox + (c0 + c1) * res / 2, oy + (r0 + r1) * res / 2, WALL_HEIGHT / 2])
+        rects = np.asarray(wall_rectangles(g.occupied), dtype=np.int64).reshape(-1, 4)
+        tile = max(1, int(round(WALL_TILE / res)))  # [cells]
+        order = np.lexsort((rects[:, 1] // tile, rects[:, 0] // tile))
+        rects = rects[order]  # (N, 4) row0, col0, row1, col1, tile by tile
+        r0, c0, r1, c1 = rects.T
+        half = np.stack([(c1 - c0) * res / 2, (r1 - r0) * res / 2,
+                         np.full(len(rects), WALL_HEIGHT / 2)], axis=1)  # (N, 3)
+        centre = np.stack([ox + (c0 + c1) * res / 2, oy + (r0 + r1) * res / 2,
+                           np.full(len(rects), WALL_HEIGHT / 2)], axis=1)  # (N, 3)
+        self._wall_bodies: list[int] = []
+        self._cell_body = np.full(g.occupied.shape, -1, dtype=np.int32)  # index in _wall_bodies
+        n = MAX_COMPOUND_SHAPES
+        for k, i in enumerate(range(0, len(rects), n)):
+            self._wall_bodies.append(self._compound_body(pybullet, half[i:i + n].tolist(),
+                                                         centre[i:i + n].tolist()))
+            for a, b, c, d in rects[i:i + n]:
+                self._cell_body[a:c, b:d] = k
         xmin, ymin, xmax, ymax = g.bounds
         t = FENCE_THICKNESS
         cx, cy = (xmin + xmax) / 2, (ymin + ymax) / 2
         hx, hy = (xmax - xmin) / 2 + t, (ymax - ymin) / 2  # the x fences cover the corners
-        for centre, half in (([cx, ymin - t / 2], [hx, t / 2]), ([cx, ymax + t / 2], [hx, t / 2]),
-                             ([xmin - t / 2, cy], [t / 2, hy]), ([xmax + t / 2, cy], [t / 2, hy])):
-            half_extents.append([*half, WALL_HEIGHT / 2])
-            centres.append([*centre, WALL_HEIGHT / 2])
-        n = len(half_extents)
-        shape = self._client.createCollisionShapeArray(
-            shapeTypes=[pybullet.GEOM_BOX] * n, halfExtents=half_extents,
-            collisionFramePositions=centres)
-        body = self._client.createMultiBody(baseMass=0, baseCollisionShapeIndex=shape)
-        return body, n
+        fence = (([cx, ymin - t / 2], [hx, t / 2]), ([cx, ymax + t / 2], [hx, t / 2]),
+                 ([xmin - t / 2, cy], [t / 2, hy]), ([xmax + t / 2, cy], [t / 2, hy]))
+        self._fence = self._compound_body(pybullet, [[*h, WALL_HEIGHT / 2] for _, h in fence],
+                                          [[*c, WALL_HEIGHT / 2] for c, _ in fence])
+        self.n_wall_boxes = len(rects) + len(fence)
+        self.n_wall_bodies = len(self._wall_bodies) + 1
 
     def _build_robot(self, pybullet) -> int:
         fp, h = self.footprint, ROBOT_HEIGHT / 2
@@ -257,31 +359,109 @@ class MazeSim:
                                fp.name)
             vertices = [[float(px), float(py), z] for px, py in fp.polygon for z in (-h, h)]
             shape = self._client.createCollisionShape(pybullet.GEOM_MESH, vertices=vertices)
-        return self._client.createMultiBody(baseMass=0, baseCollisionShapeIndex=shape,
+        body = self._client.createMultiBody(baseMass=0, baseCollisionShapeIndex=shape,
                                             basePosition=[0.0, 0.0, ROBOT_Z])
+        # the LiDAR's rays (mask RAY_FILTER_MASK) skip the robot's own body
+        self._client.setCollisionFilterGroupMask(body, -1, ROBOT_FILTER_GROUP, -1)
+        return body
+
+    def _build_obstacles(self, pybullet) -> None:
+        """A static body per obstacle; those off the map or on the start pose are rejected."""
+        t = self._total_steps * self.config.dt
+        for i, ob in enumerate(self.config.obstacles):
+            points = np.asarray(ob.path if ob.moving else [(ob.x, ob.y)], dtype=np.float64)
+            if not np.all(self.grid.in_bounds(points)):
+                self._reject(i, ob, "it is (or its path goes) outside the map")
+                continue
+            if ob.shape == "box":
+                shape = self._client.createCollisionShape(
+                    pybullet.GEOM_BOX, halfExtents=[ob.size[0] / 2, ob.size[1] / 2,
+                                                    WALL_HEIGHT / 2])
+            else:
+                shape = self._client.createCollisionShape(pybullet.GEOM_CYLINDER,
+                                                          radius=ob.radius, height=WALL_HEIGHT)
+            x, y = ob.position(t)
+            body = self._client.createMultiBody(baseMass=0, baseCollisionShapeIndex=shape,
+                                                basePosition=[x, y, WALL_HEIGHT / 2],
+                                                baseOrientation=_quaternion(ob.yaw))
+            self._place(*self._pose)
+            points = self._client.getClosestPoints(self._robot, body, 0.0)
+            depth = max(0.0, -min(p[8] for p in points)) if points else None
+            if depth is not None and depth > self.config.contact_tolerance:
+                self._client.removeBody(body)
+                self._reject(i, ob, f"it overlaps the robot's start pose "
+                                    f"({self._pose[0]:.3f}, {self._pose[1]:.3f}, "
+                                    f"{self._pose[2]:.3f}) by {depth:.3f} m")
+                continue
+            self._obstacles.append((i, ob, body))
+        self._obstacle_xy = np.array([ob.position(t) for _, ob, _ in self._obstacles],
+                                     dtype=np.float64).reshape(-1, 2)
+        self._obstacle_reach = np.array([ob.bounding_radius for _, ob, _ in self._obstacles])
+
+    def _reject(self, index: int, obstacle: Obstacle, why: str) -> None:
+        line = f"obstacle {index} {obstacle.to_dict()!r} left out: {why}"
+        self.rejected_obstacles.append(line)
+        logger.warning(line)
+
+    def _move_obstacles(self, t: float) -> None:
+        """Kinematic obstacles to their pose at time t [s]."""
+        for k, (_, ob, body) in enumerate(self._obstacles):
+            if ob.moving:
+                x, y = ob.position(t)
+                self._obstacle_xy[k] = (x, y)
+                self._client.resetBasePositionAndOrientation(body, [x, y, WALL_HEIGHT / 2],
+                                                             _quaternion(ob.yaw))
+
+    @property
+    def obstacles(self) -> list[tuple[int, Obstacle, tuple[float, float]]]:
+        """The obstacles in the world: (index in SimConfig.obstacles, obstacle, current centre)."""
+        return [(i, ob, (float(x), float(y)))
+                for (i, ob, _), (x, y) in zip(self._obstacles, self._obstacle_xy)]
 
     # ---------------------------------------------------------------------------- queries
     def _place(self, x: float, y: float, yaw: float) -> None:
         self._client.resetBasePositionAndOrientation(self._robot, [x, y, ROBOT_Z], _quaternion(yaw))
 
-    def _contact_depth(self, x: float, y: float, yaw: float) -> float | None:
-        """Deepest overlap [m] of the robot shape at a pose with the walls (0 when touching),
-        None when no wall is touched. Leaves the body at that pose."""
+    def _nearby_bodies(self, x: float, y: float) -> list[tuple[int, str, int | None]]:
+        """(body, kind, obstacle index) of the bodies that may touch the robot centred at (x, y):
+        the fence, wall bodies with a cell within reach, obstacles within reach."""
+        g, res = self.grid, self.grid.resolution
+        near = [(self._fence, WALL, None)]
+        k = int(math.ceil(self._reach / res)) + 1  # [cells]
+        col = int(math.floor((x - g.origin[0]) / res))
+        row = int(math.floor((y - g.origin[1]) / res))
+        H, W = self._cell_body.shape
+        window = self._cell_body[max(0, row - k):min(H, row + k + 1),
+                                 max(0, col - k):min(W, col + k + 1)]
+        for b in np.unique(window[window >= 0]):
+            near.append((self._wall_bodies[b], WALL, None))
+        if len(self._obstacles):
+            d = np.hypot(self._obstacle_xy[:, 0] - x, self._obstacle_xy[:, 1] - y)
+            for m in np.flatnonzero(d <= self._obstacle_reach + self._reach + 1e-6):
+                i, ob, body = self._obstacles[m]
+                near.append((body, MOVING_OBSTACLE if ob.moving else STATIC_OBSTACLE, i))
+        return near
+
+    def _contacts(self, x: float, y: float, yaw: float) -> list[Contact]:
+        """Every body the robot shape at a pose touches or overlaps. Leaves the body there."""
         self._place(x, y, yaw)
-        points = self._client.getClosestPoints(self._robot, self._walls, 0.0)
-        if not points:
-            return None
-        return max(0.0, -min(p[8] for p in points))  # p[8]: contactDistance, < 0 inside
+        found = []
+        for body, kind, index in self._nearby_bodies(x, y):
+            points = self._client.getClosestPoints(self._robot, body, 0.0)
+            if points:  # p[8]: contactDistance, < 0 inside
+                found.append(Contact(max(0.0, -min(p[8] for p in points)), kind, index))
+        return found
 
     def penetration(self, x: float, y: float, yaw: float = 0.0) -> float:
-        """Depth [m] by which the robot shape at (x, y, yaw) would overlap a wall (0 if none).
-        Does not move the simulated robot."""
-        depth = self._contact_depth(float(x), float(y), float(yaw))
+        """Depth [m] by which the robot shape at (x, y, yaw) would overlap a wall or obstacle
+        (0 if none). Does not move the simulated robot."""
+        contacts = self._contacts(float(x), float(y), float(yaw))
         self._place(*self._pose)
-        return 0.0 if depth is None else depth
+        return max((c.depth for c in contacts), default=0.0)
 
     def collides(self, x: float, y: float, yaw: float = 0.0) -> bool:
-        """Whether the robot shape at (x, y, yaw) overlaps a wall deeper than the tolerance."""
+        """Whether the robot shape at (x, y, yaw) overlaps a wall or obstacle deeper than the
+        tolerance."""
         return self.penetration(x, y, yaw) > self.config.contact_tolerance
 
     @property
@@ -295,7 +475,7 @@ class MazeSim:
         """Teleport the robot to a free pose, zero its velocity and contact count.
 
         Raises SimError for a non-finite pose, a position off the map, or a pose whose shape
-        penetrates a wall. Simulated time keeps running (it drives a monotonic clock).
+        penetrates a wall or obstacle. Simulated time keeps running (it drives a monotonic clock).
         """
         x, y, yaw = float(x), float(y), float(yaw)
         if not all(math.isfinite(v) for v in (x, y, yaw)):
@@ -304,10 +484,13 @@ class MazeSim:
             xmin, ymin, xmax, ymax = self.grid.bounds
             raise SimError(f"reset position ({x:.3f}, {y:.3f}) is outside the map "
                            f"[{xmin:.2f}, {xmax:.2f}] x [{ymin:.2f}, {ymax:.2f}] m")
-        depth = self.penetration(x, y, yaw)
-        if depth > self.config.contact_tolerance:
+        contacts = self._contacts(x, y, yaw)
+        self._place(*self._pose)
+        deepest = max(contacts, key=lambda c: c.depth, default=None)
+        if deepest is not None and deepest.depth > self.config.contact_tolerance:
+            what = "a wall" if deepest.kind == WALL else f"obstacle {deepest.obstacle}"
             raise SimError(f"reset pose ({x:.3f}, {y:.3f}, {yaw:.3f}) puts the "
-                           f"{self.footprint.name} footprint {depth:.3f} m into a wall")
+                           f"{self.footprint.name} footprint {deepest.depth:.3f} m into {what}")
         self._pose = (x, y, wrap_angle(yaw))
         self._place(*self._pose)
         self._state = SimState(*self._pose, v=0.0, w=0.0, t=self._total_steps * self.config.dt,
@@ -323,44 +506,52 @@ class MazeSim:
         cfg = self.config
         v = min(max(v, -cfg.max_v), cfg.max_v)
         w = min(max(w, -cfg.max_w), cfg.max_w)
+        # 0. moving obstacles to where they are at the end of this step
+        self._move_obstacles((self._total_steps + 1) * cfg.dt)
         # 1. sub-steps: no point of the body moves further than _max_substep in one of them
         travel = abs(v) * cfg.dt + abs(w) * cfg.dt * self._reach
         n_sub = max(1, math.ceil(travel / self._max_substep))
         h = cfg.dt / n_sub
         x0, y0, yaw0 = self._pose
-        pose, blocked = self._pose, False
+        pose, blockers = self._pose, []
         for _ in range(n_sub):
             # 2. the exact arc for this sub-step, then keep what does not penetrate
             target = unicycle_step(*pose, v, w, h)
-            pose, clipped = self._move(pose, target)
-            blocked |= clipped
+            pose, blocker = self._move(pose, target)
+            blockers += blocker
         x1, y1, yaw1 = pose
         self._pose = (x1, y1, wrap_angle(yaw1))
         # 3. contact at the final pose
-        touching = self._contact_depth(*self._pose) is not None
+        touching = self._contacts(*self._pose)
         self._total_steps += 1
-        in_contact = blocked or touching
-        if blocked:  # report the velocity that was realised, not the one commanded
+        in_contact = bool(blockers or touching)
+        if blockers:  # report the velocity that was realised, not the one commanded
             mid = yaw0 + (yaw1 - yaw0) / 2
             v = ((x1 - x0) * math.cos(mid) + (y1 - y0) * math.sin(mid)) / cfg.dt
             w = (yaw1 - yaw0) / cfg.dt
         count = self.state.contact_count + int(in_contact)
+        kind, obstacle = _collision_kind(blockers + touching)
         self._state = SimState(*self._pose, v=v, w=w, t=self._total_steps * cfg.dt,
-                               in_contact=in_contact, contact_count=count)
+                               in_contact=in_contact, contact_count=count,
+                               collision_kind=kind, collision_obstacle=obstacle)
         return self._state
 
-    def _move(self, pose: tuple[float, float, float],
-              target: tuple[float, float, float]) -> tuple[tuple[float, float, float], bool]:
-        """Move from pose towards target, rejecting the penetrating part -> (new pose, clipped)."""
-        depth0 = self._contact_depth(*pose)
-        allowed = max(self.config.contact_tolerance, depth0 or 0.0) + 1e-9
+    def _move(self, pose: tuple[float, float, float], target: tuple[float, float, float]
+              ) -> tuple[tuple[float, float, float], list[Contact]]:
+        """Move from pose towards target, rejecting the penetrating part -> (new pose, the
+        contacts that blocked the move; empty when it was not clipped)."""
+        depth0 = max((c.depth for c in self._contacts(*pose)), default=0.0)
+        allowed = max(self.config.contact_tolerance, depth0) + 1e-9
+        blockers: list[Contact] = []
 
         def fits(p: tuple[float, float, float]) -> bool:
-            depth = self._contact_depth(*p)
-            return depth is None or depth <= allowed
+            deep = [c for c in self._contacts(*p) if c.depth > allowed]
+            if deep and not blockers:
+                blockers.extend(deep)
+            return not deep
 
         if fits(target):
-            return target, False
+            return target, []
         # advance along the move as far as it fits (bisection on the fraction of the move)
         lo, hi = 0.0, 1.0
         for _ in range(BISECTION_STEPS):
@@ -378,15 +569,66 @@ class MazeSim:
         for yaw in (target[2], pyaw):
             for sx, sy in slides:
                 if fits((sx, sy, yaw)):
-                    return (sx, sy, yaw), True
+                    return (sx, sy, yaw), blockers
             if yaw != pyaw and fits((px, py, yaw)):
-                return (px, py, yaw), True
-        return (px, py, pyaw), True
+                return (px, py, yaw), blockers
+        return (px, py, pyaw), blockers
+
+    # ------------------------------------------------------------------------------ sensing
+    def sensor_pose(self, offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+                    ) -> tuple[float, float, float]:
+        """(x [m], y [m], yaw [rad]) in the map frame of a sensor mounted at ``offset``
+        (x, y, yaw in base_link) on the robot at its current pose."""
+        x, y, yaw = self._pose
+        ox, oy, oyaw = (float(v) for v in offset)
+        c, s = math.cos(yaw), math.sin(yaw)
+        return x + c * ox - s * oy, y + s * ox + c * oy, wrap_angle(yaw + oyaw)
+
+    def scan(self, offset: tuple[float, float, float] = (0.0, 0.0, 0.0), beams: int = 360,
+             range_min: float = 0.1, range_max: float = 8.0, angle_min: float = -math.pi,
+             angle_max: float | None = None, *, noise_std: float = 0.0,
+             rng: np.random.Generator | None = None) -> np.ndarray:
+        """A 2D LiDAR scan from the current pose -> (beams,) ranges [m], REP 117 style.
+
+        offset: (x [m], y [m], yaw [rad]) of the sensor in base_link. Beam i points at
+        angle_min + i * increment in the sensor frame (see :func:`scan_angles`; angle_max None
+        = a full turn). A beam that hits nothing within range_max reads ``inf``; a hit closer
+        than range_min reads ``-inf``. noise_std [m]: Gaussian noise added to the hits (from
+        ``rng``, by default the simulator's generator seeded with ``SimConfig.seed``) before
+        that classification. Walls and obstacles are seen; the robot's own body is not.
+        """
+        if not (math.isfinite(range_min) and math.isfinite(range_max)
+                and 0 <= range_min < range_max):
+            raise SimError(f"scan range must satisfy 0 <= range_min < range_max, got "
+                           f"[{range_min}, {range_max}]")
+        if not (math.isfinite(noise_std) and noise_std >= 0):
+            raise SimError(f"scan noise_std must be >= 0 m, got {noise_std}")
+        angles, _ = scan_angles(beams, angle_min, angle_max)  # (N,) in the sensor frame
+        sx, sy, syaw = self.sensor_pose(offset)
+        a = syaw + angles
+        n = len(a)
+        starts = np.tile([sx, sy, SCAN_Z], (n, 1))  # (N, 3)
+        ends = np.stack([sx + range_max * np.cos(a), sy + range_max * np.sin(a),
+                         np.full(n, SCAN_Z)], axis=1)  # (N, 3)
+        fraction = np.ones(n)
+        for i in range(0, n, RAY_BATCH):
+            hits = self._client.rayTestBatch(starts[i:i + RAY_BATCH].tolist(),
+                                             ends[i:i + RAY_BATCH].tolist(),
+                                             collisionFilterMask=RAY_FILTER_MASK)
+            fraction[i:i + len(hits)] = [h[2] if h[0] >= 0 else 1.0 for h in hits]
+        hit = fraction < 1.0
+        ranges = np.where(hit, fraction * range_max, np.inf)
+        if noise_std > 0:
+            rng = self._rng if rng is None else rng
+            ranges[hit] += rng.normal(0.0, noise_std, int(hit.sum()))
+            ranges[hit & (ranges > range_max)] = np.inf
+        ranges[hit & (ranges < range_min)] = -np.inf
+        return ranges
 
     # ------------------------------------------------------------------------------ output
     def render_topdown(self, size: int = 256) -> np.ndarray:
-        """A top view drawn with OpenCV: walls dark grey, the robot's footprint blue (red while
-        in contact) with a yellow heading line. size: [px] of the longer side
+        """A top view drawn with OpenCV: walls dark grey, obstacles brown, the robot's footprint
+        blue (red while in contact) with a yellow heading line. size: [px] of the longer side
         -> (H, W, 3) uint8 RGB, north (+y) up."""
         import cv2
 
@@ -410,6 +652,8 @@ class MazeSim:
             return np.stack([(xy[..., 0] - xmin) * scale, (ymax - xy[..., 1]) * scale],
                             axis=-1).round().astype(np.int32)
 
+        for _, ob, _ in self._obstacles:
+            cv2.fillPoly(img, [to_px(ob.footprint(s.t))], _OBSTACLE_RGB)
         outline = self.footprint.transformed(np.array([s.x, s.y]), np.array(s.yaw), "polygon")
         cv2.fillPoly(img, [to_px(outline)], _CONTACT_RGB if s.in_contact else _ROBOT_RGB)
         nose = np.array([s.x, s.y]) + self._reach * np.array([math.cos(s.yaw), math.sin(s.yaw)])

@@ -60,15 +60,32 @@ def test_maze2d_large_is_a_few_boxes(sim_factory):
     assert sim.n_wall_boxes < 100  # 17 merged maze walls + 4 fence boxes, not 3000 cells
 
 
-def test_walls_exactly_where_the_map_is_occupied(sim_factory):
+@pytest.mark.parametrize("name", ["maze2d-umaze", "maze2d-large"])
+def test_walls_exactly_where_the_map_is_occupied(sim_factory, name):
     # A 4 cm square at each 0.1 m cell centre: the nearest wall face of a free cell is at least
     # 0.05 m away (> 0.02 m half size) and a wall cell's centre is 0.05 m deep inside the wall.
-    sim = sim_factory(map="maze2d-umaze", resolution=0.1, robot=TINY_SQUARE)
-    grid = builtin_map("maze2d-umaze", 0.1)
+    # maze2d-large has 21 boxes: more than the 16 children PyBullet keeps in one compound shape.
+    sim = sim_factory(map=name, resolution=0.1, robot=TINY_SQUARE)
+    grid = builtin_map(name, 0.1)
     rows, cols = np.indices(grid.occupied.shape)
     centres = grid.cell_to_world(rows.ravel(), cols.ravel())
     hits = np.array([sim.collides(x, y) for x, y in centres]).reshape(grid.occupied.shape)
     assert np.array_equal(hits, grid.occupied)
+
+
+def test_hundreds_of_speckle_boxes_are_all_walls(sim_factory, tmp_path):
+    # 2% random speckle on a 40 x 40 map at 0.1 m/cell: hundreds of boxes in bodies of <= 16
+    rng = np.random.default_rng(0)
+    occ = rng.random((40, 40)) < 0.02
+    occ[:3, :3] = False
+    sim = sim_factory(map=_yaml_map(tmp_path, occ, 0.1, "speckle"), robot=TINY_SQUARE,
+                      start=(0.15, 0.15, 0.0))
+    assert sim.n_wall_boxes == len(wall_rectangles(occ)) + 4 > 16
+    assert sim.n_wall_bodies == math.ceil((sim.n_wall_boxes - 4) / 16) + 1
+    rows, cols = np.indices(occ.shape)
+    centres = sim.grid.cell_to_world(rows.ravel(), cols.ravel())
+    hits = np.array([sim.collides(x, y) for x, y in centres]).reshape(occ.shape)
+    assert np.array_equal(hits, occ)
 
 
 def test_circle_at_wall_cell_collides_at_free_cell_does_not(sim_factory):

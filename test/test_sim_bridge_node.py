@@ -1,5 +1,7 @@
 """The sim_bridge node in-process on maze2d-umaze, as fast as possible: latched map, cmd_vel
-drives odom, stale commands stop, sim clock, bad input logged and ignored."""
+drives odom, stale commands stop, sim clock, bad input logged and ignored, a configuration that
+cannot work raised, LiDAR scans, obstacles from a scenario file (markers, contacts by kind)."""
+import json
 import math
 import os
 import time
@@ -13,9 +15,11 @@ from nav_msgs.msg import OccupancyGrid, Odometry  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
-from sensor_msgs.msg import Image  # noqa: E402
-from std_msgs.msg import Bool  # noqa: E402
+from sensor_msgs.msg import Image, LaserScan  # noqa: E402
+from std_msgs.msg import Bool, String  # noqa: E402
+from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
 
+from ecahd_core.errors import EcahdError  # noqa: E402
 from ecahd_core.maps import builtin_map  # noqa: E402
 from ecahd_ros.conversions import msg_to_grid, pose_from_xy_yaw, yaw_from_quaternion  # noqa: E402
 from ecahd_ros.qos import MAP_QOS  # noqa: E402
@@ -164,9 +168,74 @@ def test_camera_image_is_rgb8_top_view(bridge_setup):
     assert len(img.data) == 256 * 256 * 3
 
 
-def test_bad_parameters_are_logged_not_raised(ros_context):
-    for params in ([Parameter("map", value="no-such-map")],
-                   [Parameter("map", value="maze2d-umaze"), Parameter("rate_hz", value=-5.0)]):
-        bridge = SimBridge(context=ros_context, parameter_overrides=params)
-        assert bridge.sim is None
-        bridge.destroy_node()
+@pytest.mark.parametrize("params, match", [
+    ({"map": "no-such-map"}, "no-such-map"),
+    ({"rate_hz": -5.0}, "rate_hz"),
+    ({"scan_beams": 0}, "scan_beams"),
+    ({"scan_range_min": 2.0, "scan_range_max": 1.0}, "scan_range_max"),
+    ({"obstacles_file": "/nonexistent/scenario.yaml"}, "cannot read scenario"),
+])
+def test_a_configuration_that_cannot_work_is_raised(ros_context, params, match):
+    values = {"map": "maze2d-umaze", **params}
+    with pytest.raises(EcahdError, match=match):
+        SimBridge(context=ros_context,
+                  parameter_overrides=[Parameter(k, value=v) for k, v in values.items()])
+
+
+def test_scan_is_a_full_turn_laserscan_at_the_scan_rate(bridge_setup):
+    # umaze corridor y in [1, 2], x in [1, 4]; robot at (1.5, 1.5) facing +x, LiDAR 0.1 m ahead
+    bridge, probe, executor = bridge_setup(scan_rate_hz=10.0, scan_beams=4, scan_offset_x=0.1,
+                                           scan_range_max=5.0)
+    scans = []
+    probe.create_subscription(LaserScan, "scan", scans.append, 10)
+    spin_until(executor, lambda: len(scans) >= 3)
+    s = scans[-1]
+    assert s.header.frame_id == "base_scan"
+    assert (s.angle_min, s.angle_increment) == pytest.approx((-math.pi, math.pi / 2))
+    assert s.angle_max == pytest.approx(s.angle_min + 3 * s.angle_increment)  # pi - increment
+    assert (s.range_min, s.range_max, s.scan_time) == pytest.approx((0.1, 5.0, 0.1))
+    # beams -pi, -pi/2, 0, pi/2: walls x = 1, y = 1, x = 4 and y = 2 seen from (1.6, 1.5)
+    assert list(s.ranges) == pytest.approx([0.6, 0.5, 2.4, 0.5], abs=1e-5)
+    stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for m in scans]
+    assert np.diff(stamps) == pytest.approx(np.full(len(stamps) - 1, 0.1))  # sim time
+
+
+def test_no_scan_when_disabled(bridge_setup):
+    bridge, probe, executor = bridge_setup(publish_scan=False)
+    assert bridge.count_publishers("scan") == 0
+
+
+def test_obstacles_file_bad_entry_logged_markers_and_contact_detail(bridge_setup, tmp_path,
+                                                                     capfd):
+    # obstacle 1: a cylinder r = 0.2 rolling from (3.5, 1.5) to (1.9, 1.5) at 2 m/s: it touches
+    # the robot (r = 0.4 at x = 1.5) once its centre is at x <= 2.1, after 0.7 s
+    scenario = tmp_path / "scenario.yaml"
+    scenario.write_text("obstacles:\n"
+                        "  - {shape: box, x: 3.5, y: 3.5, size: [0.4, 0.4]}\n"
+                        "  - {shape: cylinder, radius: 0.2, path: [[3.5, 1.5], [1.9, 1.5]], "
+                        "speed: 2.0}\n"
+                        "  - {shape: cone, x: 2.0, y: 2.0}\n")
+    bridge, probe, executor = bridge_setup(obstacles_file=str(scenario))
+    assert "obstacle 2 {'shape': 'cone'" in capfd.readouterr().err
+    markers, details = [], []
+    probe.create_subscription(MarkerArray, "sim_obstacles", markers.append, 10)
+    probe.create_subscription(String, "collision_detail", details.append, 10)
+    spin_until(executor, lambda: markers and details)
+    kinds = {m.id: m.type for m in markers[-1].markers}
+    assert kinds == {0: Marker.CUBE, 1: Marker.CYLINDER}
+    assert all(m.header.frame_id == "map" for m in markers[-1].markers)
+    detail = json.loads(details[0].data)
+    assert (detail["kind"], detail["obstacle"]) == ("moving_obstacle", 1)
+    assert detail["t"] == pytest.approx(0.7, abs=DT + 1e-9)
+    assert (detail["x"], detail["y"]) == pytest.approx(START[:2])
+
+
+def test_obstacles_never_appear_on_the_map(bridge_setup, tmp_path):
+    scenario = tmp_path / "scenario.yaml"
+    scenario.write_text("obstacles:\n  - {shape: box, x: 3.5, y: 1.5, size: [0.4, 0.4]}\n")
+    bridge, probe, executor = bridge_setup(obstacles_file=str(scenario))
+    received = []
+    probe.create_subscription(OccupancyGrid, "map", received.append, MAP_QOS)
+    spin_until(executor, lambda: received)
+    assert np.array_equal(msg_to_grid(received[0]).occupied,
+                          builtin_map("maze2d-umaze", 0.1).occupied)

@@ -1,0 +1,264 @@
+"""Scenario files: obstacles that are not on the map (issue 11), static or moving back and forth.
+
+A scenario is a YAML file that the simulator reads (``sim_bridge``'s ``obstacles_file``) and a
+benchmark writes; the planners never see it (obstacles never appear on ``map``)::
+
+    obstacles:
+      - {shape: box, x: 4.5, y: 5.5, yaw: 0.0, size: [0.4, 0.6]}       # static box
+      - {shape: cylinder, x: 6.5, y: 5.3, radius: 0.25}                # static cylinder
+      - {shape: cylinder, radius: 0.3, path: [[1.5, 3.5], [1.5, 5.5]], speed: 0.4}  # moving
+
+Units: metres, radians, m/s, in the map frame. ``size`` is a box's full extent [x, y] in its own
+frame, turned by ``yaw`` about its centre (yaw is optional, 0 by default). A moving obstacle has
+a ``path`` of at least 2 points [[x, y], ...] instead of x, y, and a ``speed`` > 0: it starts at
+the first point at t = 0 and goes back and forth along the polyline at that speed forever
+(ping-pong, no wrap-around), keeping its yaw. Every obstacle is 1 m high (as the walls).
+
+Bad entries do not spoil the others: :func:`parse_obstacles` returns the good obstacles and one
+error line per bad entry, naming its index and content (unknown shape or key, a missing field,
+a NaN, a non-positive size / radius / speed, a path of fewer than 2 points or zero length).
+No pybullet, no rclpy here: ``sim_bridge.sim`` builds the bodies, a benchmark's exact checker can
+use :func:`obstacle_footprints`.
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ecahd_core.errors import EcahdError
+
+SHAPES = ("box", "cylinder")
+CYLINDER_POLYGON_SIDES = 32  # footprint polygon of a cylinder (circumscribed, so never smaller)
+_KEYS = {"shape", "x", "y", "yaw", "size", "radius", "path", "speed"}
+
+
+class ScenarioError(EcahdError):
+    """A scenario file that cannot be read: missing, not YAML, no ``obstacles`` list, or (for the
+    strict :func:`load_scenario`) any bad entry."""
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """One obstacle of a scenario.
+
+    Attributes:
+        shape: "box" or "cylinder".
+        x, y: [m] centre at t = 0 (a moving obstacle's first path point).
+        yaw: [rad] heading of a box (cylinders: 0).
+        size: (sx, sy) [m] full extent of a box in its own frame; None for cylinders.
+        radius: [m] of a cylinder; None for boxes.
+        path: ((x, y), ...) [m] polyline a moving obstacle runs back and forth; () when static.
+        speed: [m/s] along the path; 0 when static.
+    """
+
+    shape: str
+    x: float
+    y: float
+    yaw: float = 0.0
+    size: tuple[float, float] | None = None
+    radius: float | None = None
+    path: tuple[tuple[float, float], ...] = ()
+    speed: float = 0.0
+
+    @property
+    def moving(self) -> bool:
+        return len(self.path) >= 2
+
+    @property
+    def path_length(self) -> float:
+        """[m] length of the polyline (0 when static)."""
+        if not self.moving:
+            return 0.0
+        return float(np.sum(np.linalg.norm(np.diff(np.asarray(self.path), axis=0), axis=1)))
+
+    @property
+    def bounding_radius(self) -> float:
+        """[m] radius of the circle about the centre that holds the whole shape."""
+        if self.shape == "cylinder":
+            return float(self.radius)
+        return 0.5 * math.hypot(*self.size)
+
+    def position(self, t: float) -> tuple[float, float]:
+        """Centre (x, y) [m] at time t [s]: constant when static; a moving obstacle is at path
+        arc length s = speed t folded into [0, L] back and forth (s mod 2L, mirrored past L)."""
+        if not self.moving:
+            return self.x, self.y
+        pts = np.asarray(self.path, dtype=np.float64)  # (K, 2)
+        seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)  # (K-1,)
+        length = float(seg.sum())
+        s = math.fmod(self.speed * max(float(t), 0.0), 2.0 * length)
+        if s > length:
+            s = 2.0 * length - s
+        cum = np.concatenate([[0.0], np.cumsum(seg)])  # (K,) arc length at each point
+        i = int(np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(seg) - 1))
+        u = 0.0 if seg[i] == 0 else (s - cum[i]) / seg[i]
+        x, y = pts[i] + min(max(u, 0.0), 1.0) * (pts[i + 1] - pts[i])
+        return float(x), float(y)
+
+    def footprint(self, t: float = 0.0) -> np.ndarray:
+        """(K, 2) counter-clockwise polygon [m] of the shape at time t: a box's 4 corners, or a
+        32-gon circumscribing a cylinder (it contains the circle)."""
+        cx, cy = self.position(t)
+        if self.shape == "box":
+            hx, hy = self.size[0] / 2, self.size[1] / 2
+            local = np.array([[hx, hy], [-hx, hy], [-hx, -hy], [hx, -hy]])
+            c, s = math.cos(self.yaw), math.sin(self.yaw)
+            return local @ np.array([[c, s], [-s, c]]) + [cx, cy]
+        n = CYLINDER_POLYGON_SIDES
+        a = 2.0 * math.pi * np.arange(n) / n
+        r = self.radius / math.cos(math.pi / n)
+        return np.stack([cx + r * np.cos(a), cy + r * np.sin(a)], axis=1)
+
+    def to_dict(self) -> dict:
+        """The YAML entry of this obstacle (the format :func:`parse_obstacles` reads)."""
+        entry: dict = {"shape": self.shape}
+        if self.moving:
+            entry["path"] = [[float(px), float(py)] for px, py in self.path]
+            entry["speed"] = float(self.speed)
+        else:
+            entry["x"], entry["y"] = float(self.x), float(self.y)
+        if self.shape == "box":
+            entry["yaw"] = float(self.yaw)
+            entry["size"] = [float(v) for v in self.size]
+        else:
+            entry["radius"] = float(self.radius)
+        return entry
+
+
+def obstacle_footprints(obstacles, t: float = 0.0) -> list[np.ndarray]:
+    """The (K, 2) polygon [m] of every obstacle at time t [s] (see :meth:`Obstacle.footprint`)."""
+    return [o.footprint(t) for o in obstacles]
+
+
+# ------------------------------------------------------------------------------- parsing
+def _number(entry: dict, key: str, *, positive: bool = False) -> float:
+    if key not in entry:
+        raise ValueError(f"missing field {key!r}")
+    value = entry[key]
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"{key} must be a number, got {value!r}")
+    value = float(value)
+    if not math.isfinite(value):
+        raise ValueError(f"{key} must be finite, got {value}")
+    if positive and value <= 0:
+        raise ValueError(f"{key} must be > 0, got {value:g}")
+    return value
+
+
+def _point(value, what: str) -> tuple[float, float]:
+    if not (isinstance(value, (list, tuple)) and len(value) == 2):
+        raise ValueError(f"{what} must be [x, y], got {value!r}")
+    x, y = (_number({"v": v}, "v") for v in value)
+    return x, y
+
+
+def parse_obstacle(entry) -> Obstacle:
+    """One YAML entry -> Obstacle; raises ValueError with the reason (without the entry)."""
+    if not isinstance(entry, dict):
+        raise ValueError("an obstacle must be a mapping {shape: ..., ...}")
+    unknown = sorted(set(map(str, entry)) - _KEYS)
+    if unknown:
+        raise ValueError(f"unknown field(s) {', '.join(unknown)} "
+                         f"(allowed: {', '.join(sorted(_KEYS))})")
+    shape = entry.get("shape")
+    if shape not in SHAPES:
+        raise ValueError(f"shape must be one of {', '.join(SHAPES)}, got {shape!r}"
+                         if "shape" in entry else "missing field 'shape'")
+    yaw = _number(entry, "yaw") if "yaw" in entry else 0.0
+    size, radius = None, None
+    if shape == "box":
+        if "radius" in entry:
+            raise ValueError("a box takes size [sx, sy], not radius")
+        if "size" not in entry:
+            raise ValueError("missing field 'size'")
+        sx, sy = _point(entry["size"], "size")
+        if not (sx > 0 and sy > 0):
+            raise ValueError(f"size must be > 0 in both directions, got [{sx:g}, {sy:g}]")
+        size = (sx, sy)
+    else:
+        if "size" in entry:
+            raise ValueError("a cylinder takes radius, not size")
+        radius = _number(entry, "radius", positive=True)
+    if "path" in entry or "speed" in entry:
+        if "x" in entry or "y" in entry:
+            raise ValueError("a moving obstacle starts at path[0]: give path and speed, not x, y")
+        raw = entry.get("path")
+        if not isinstance(raw, (list, tuple)) or len(raw) < 2:
+            raise ValueError(f"path must be a list of at least 2 points [x, y], got {raw!r}")
+        path = tuple(_point(p, f"path point {k}") for k, p in enumerate(raw))
+        speed = _number(entry, "speed", positive=True)
+        obstacle = Obstacle(shape, *path[0], yaw, size, radius, path, speed)
+        if obstacle.path_length <= 0:
+            raise ValueError("path has zero length (all its points are the same)")
+        return obstacle
+    return Obstacle(shape, _number(entry, "x"), _number(entry, "y"), yaw, size, radius)
+
+
+def parse_obstacles(data) -> tuple[list[Obstacle], list[str]]:
+    """A loaded scenario ({"obstacles": [...]}, or None / {} for none) -> (obstacles, errors).
+
+    Each bad entry is left out and gives one line "obstacle <i> <entry>: <reason>". Raises
+    ScenarioError when the document itself is not a scenario (not a mapping, ``obstacles`` not a
+    list, unknown top-level keys)."""
+    if data is None:
+        return [], []
+    if not isinstance(data, dict):
+        raise ScenarioError(f"a scenario must be a mapping with an 'obstacles' list, "
+                            f"got {type(data).__name__}")
+    unknown = sorted(set(map(str, data)) - {"obstacles"})
+    if unknown:
+        raise ScenarioError(f"unknown scenario key(s) {', '.join(unknown)} (allowed: obstacles)")
+    entries = data.get("obstacles") or []
+    if not isinstance(entries, list):
+        raise ScenarioError(f"scenario 'obstacles' must be a list, got {type(entries).__name__}")
+    obstacles, errors = [], []
+    for i, entry in enumerate(entries):
+        try:
+            obstacles.append(parse_obstacle(entry))
+        except ValueError as exc:
+            errors.append(f"obstacle {i} {entry!r}: {exc}")
+    return obstacles, errors
+
+
+def read_scenario(path: str | os.PathLike) -> tuple[list[Obstacle], list[str]]:
+    """Read a scenario YAML -> (good obstacles, one error line per bad entry). Raises
+    ScenarioError for a missing or unreadable file or a document that is not a scenario."""
+    import yaml
+
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except OSError as exc:
+        raise ScenarioError(f"cannot read scenario {path}: {exc.strerror or exc}") from exc
+    except yaml.YAMLError as exc:
+        raise ScenarioError(f"scenario {path} is not valid YAML: {exc}") from exc
+    try:
+        return parse_obstacles(data)
+    except ScenarioError as exc:
+        raise ScenarioError(f"scenario {path}: {exc}") from exc
+
+
+def load_scenario(path: str | os.PathLike) -> list[Obstacle]:
+    """Read a scenario YAML strictly: every entry must be good, else ScenarioError listing the
+    bad ones (the simulator node uses the lenient :func:`read_scenario`)."""
+    obstacles, errors = read_scenario(path)
+    if errors:
+        raise ScenarioError(f"scenario {path} has {len(errors)} bad obstacle(s):\n"
+                            + "\n".join(errors))
+    return obstacles
+
+
+def write_scenario(path: str | os.PathLike, obstacles) -> Path:
+    """Write obstacles as a scenario YAML that :func:`load_scenario` reads back equal."""
+    import yaml
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    text = yaml.safe_dump({"obstacles": [o.to_dict() for o in obstacles]},
+                          default_flow_style=None, sort_keys=False)
+    path.write_text(text)
+    return path
