@@ -155,3 +155,28 @@ def test_filter_speed_is_reported(robot):
     print(f"CollisionMonitor.filter ({robot}, 360 points, 10 steps): median "
           f"{1e3 * float(np.median(times)):.3f} ms, action {result.action}")
     assert result.action in ("slowdown", "stop")
+
+
+def test_monitor_benchmark_small(tmp_path, capsys):
+    # ``ecahd bench monitor`` on a 200 x 200 map with a 60-cell window: the JSON has every
+    # timing, the table names the three measurements; no assertion on the times themselves
+    import argparse
+    import json
+
+    from ecahd_core.commands import bench
+
+    parser = argparse.ArgumentParser(prog="ecahd bench")
+    bench.add_arguments(parser)
+    out = tmp_path / "monitor.json"
+    args = parser.parse_args(["monitor", "--map-cells", "200", "--window", "1.8", "--points", "90",
+                              "--repeats", "5", "--reference-repeats", "1", "--json", str(out)])
+    assert bench.run(args) == 0
+    result = json.loads(out.read_text())
+    assert (result["window_cells"], result["map_cells"], result["steps"]) == (60, 200, 10)
+    for name in ("filter", "update", "fused"):
+        t = result[name]
+        assert 0 < t["p50_ms"] <= t["p99_ms"]
+        assert t["budget_ratio"] == pytest.approx(t["p99_ms"] / t["budget_ms"])
+    assert result["filter"]["speedup"] > 0 and result["update"]["speedup"] is None
+    printed = capsys.readouterr().out
+    assert "CollisionMonitor.filter" in printed and "update + fused_costmap" in printed

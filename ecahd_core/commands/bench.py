@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+from ecahd_core.bench import monitor as bench_monitor
 from ecahd_core.bench.cost import CostBenchSettings
 from ecahd_core.errors import EcahdError
 
@@ -247,6 +248,9 @@ BENCHMARKS: dict[str, Benchmark] = {
                           add_arguments=_add_planning_arguments, run=_run_planning),
     "sd-quality": Benchmark(help="SD alone: goal reach and point-robot collision-free rate",
                             add_arguments=_add_sd_quality_arguments, run=_run_sd_quality),
+    "monitor": Benchmark(help="collision monitor filter and local costmap update + fusion: "
+                              "p50/p99 per call against their budgets",
+                         add_arguments=bench_monitor.add_arguments, run=bench_monitor.run),
 }
 
 
