@@ -12,7 +12,9 @@ Units: metres, radians, m/s, in the map frame. ``size`` is a box's full extent [
 frame, turned by ``yaw`` about its centre (yaw is optional, 0 by default). A moving obstacle has
 a ``path`` of at least 2 points [[x, y], ...] instead of x, y, and a ``speed`` > 0: it starts at
 the first point at t = 0 and goes back and forth along the polyline at that speed forever
-(ping-pong, no wrap-around), keeping its yaw. Every obstacle is 1 m high (as the walls).
+(ping-pong, no wrap-around), keeping its yaw. Every obstacle is 1 m high (as the walls). A moving
+obstacle is kinematic: it passes through walls, other obstacles and the robot (an overlap with the
+robot is a contact), so give it a path through free space.
 
 Bad entries do not spoil the others: :func:`parse_obstacles` returns the good obstacles and one
 error line per bad entry, naming its index and content (unknown shape or key, a missing field,

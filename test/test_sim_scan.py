@@ -8,7 +8,7 @@ import pytest
 
 from ecahd_core.maps import FREE, OCCUPIED, GridMap, save_nav2_yaml
 from ecahd_core.scenario import Obstacle
-from sim_bridge.sim import MazeSim, SimConfig, SimError, scan_angles
+from sim_bridge.sim import RAY_BATCH, MazeSim, SimConfig, SimError, scan_angles
 
 BEAMS = 360  # 1 degree apart, beam i at -pi + i deg: beam 180 straight ahead, beam 0 behind
 AHEAD, BEHIND, LEFT = 180, 0, 270
@@ -59,6 +59,15 @@ def test_wall_ahead_reads_its_distance_minus_the_mounting_offset(make_sim):
     # a beam at angle a hits the wall x = 7.5 at 4.3 / cos(a) while |4.3 tan a| < 3.5
     a = np.deg2rad(np.arange(-30, 31))
     assert r[AHEAD - 30:AHEAD + 31] == pytest.approx(4.3 / np.cos(a), abs=1e-6)
+
+
+def test_more_beams_than_one_ray_batch(make_sim):
+    sim = make_sim()
+    r = sim.scan((0.0, 0.0, 0.0), 2 * RAY_BATCH + 4, 0.1, 8.0)  # three rayTestBatch calls
+    angles, _ = scan_angles(len(r))
+    ahead = np.abs(angles) < 0.5  # the wall x = 7.5 at 4.5 / cos(a)
+    assert r[ahead] == pytest.approx(4.5 / np.cos(angles[ahead]), abs=1e-6)
+    assert np.all(np.isfinite(r))  # every beam ends on the 8 m x 8 m border
 
 
 def test_offset_yaw_turns_the_fan_and_follows_the_robot(make_sim):
@@ -129,6 +138,12 @@ def test_static_obstacle_blocks_like_a_wall_and_is_told_apart(make_sim):
     assert (s.collision_kind, s.collision_obstacle) == ("wall", None)
     with pytest.raises(SimError, match="into obstacle 0"):
         sim.reset(5.0, 4.0)
+
+
+def test_render_topdown_draws_obstacles(make_sim):
+    sim = make_sim([Obstacle("box", 5.5, 4.0, 0.0, (1.0, 1.0))])
+    img = sim.render_topdown(80)  # 8 m -> 10 px/m; (5.5, 4.0) is pixel row 40, column 55
+    assert tuple(img[40, 55]) == (150, 100, 40)
 
 
 def test_obstacles_on_the_start_or_off_the_map_are_left_out_with_a_line(make_sim):
