@@ -372,7 +372,7 @@ class SimBridge(Node):
 
 
 def main(args=None) -> None:
-    spin_node(SimBridge, args)
+    spin_node(SimBridge, args, name="sim_bridge")
 
 
 if __name__ == "__main__":
