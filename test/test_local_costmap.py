@@ -212,6 +212,7 @@ def test_fused_costmap_equals_the_map_with_the_obstacle_drawn_in(dilation):
     lc = make()
     one_beam(lc, 0.5)
     fused = lc.fused_costmap(grid, cfg)
+    assert isinstance(fused, CostMap) and fused.shape == (100, 100)
     reference = cfg.make_costmap(static_grid(occupied=[(20, 20), (50, 55)]))
     torch.testing.assert_close(fused.grid, reference.grid)
     assert (fused.margin, fused.dilation, fused.origin, fused.resolution) == (
