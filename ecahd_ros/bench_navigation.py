@@ -73,7 +73,7 @@ class NavigationBenchSettings:
     robot: str = "circle"
     map: str = "maze2d-large"
     variants: tuple[str, ...] = VARIANT_KEYS
-    realtime_factor: float = 4.0
+    realtime_factor: float = 1.0
     max_steps: int = 800
     hold_steps: int = 10  # an episode ends once the goal is held this long (800: D4RL's length)
     domain_id: int | None = None  # the first variant's; the others count up. None: from the pid

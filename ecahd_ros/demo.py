@@ -1,31 +1,38 @@
-"""``ecahd demo``: the whole ROS 2 graph in one process, driven through seeded goals, recorded
-and scored against the paper's Table III.
+"""``ecahd demo``: the ROS 2 graph run as a robot runs it, driven through seeded goals,
+recorded and scored against the paper's Table III.
 
-Composition (one private rclpy Context and domain, one SingleThreadedExecutor spun with
-``spin_once`` by the episode loop): ``sim_bridge`` (PyBullet, its own simulated clock),
-``global_planner`` (SD), ``local_refiner`` (J check + DD, 10 Hz control), ``bag_recorder``
-(every default topic into OUT/bag) and a small ``demo`` node that publishes ``goal_pose`` and
-listens to ``plan``. ``DemoConfig.planner_params`` / ``refiner_params`` override the planner's
-and refiner's parameters (e.g. ``{"method": "astar"}``, ``{"dd_enabled": False}``: the
-baselines of ``ecahd bench navigation``).
-The planner, refiner and recorder run with ``use_sim_time``: the refiner's 10 Hz control timer,
-its staleness checks and the bag's receive stamps follow ``/clock``, so a control step is 0.1 s
-of simulated time whatever the realtime factor, and planning time stalls simulated time instead
-of letting the robot drive blind (one thread: while a plan is computed nothing steps).
+Composition: ``sim_bridge`` (PyBullet, its own simulated clock), ``global_planner`` (SD) and
+``local_refiner`` (J check + DD on a worker, 20 Hz control) each run in **their own process**
+(``python -m <module> --ros-args --params-file``, as ``ros2 launch`` starts them; their logs go
+to OUT/logs/), on a private ROS domain. This process hosts ``bag_recorder`` (every default topic
+into OUT/bag) and a small ``demo`` node that publishes ``goal_pose`` and watches ``odom``,
+``cmd_vel`` and ``plan``. ``DemoConfig.planner_params`` / ``refiner_params`` override the
+planner's and refiner's parameters (e.g. ``{"method": "astar"}``, ``{"dd_enabled": False}``:
+the baselines of ``ecahd bench navigation``).
+
+Time is honest: the simulator steps on its own wall-clock timer whatever the planners do, so
+the robot keeps moving (on its last command, until ``control_timeout``) while SD and DD think,
+as on a robot. The planner, refiner and recorder follow ``/clock`` (``use_sim_time``). The
+default realtime factor is 1 (real time); with a factor k > 1 the simulation runs k times
+faster than the wall clock, so every millisecond of planning costs k milliseconds of simulated
+time: planning latency is scaled into sim time, not hidden. (Before 2026-11-28 the demo ran
+every node on one executor in one process: planning stopped the simulated clock; docs/RESULTS.md
+keeps those "lock-step" figures beside the concurrent ones.)
 
 Episodes: goals come from ``make_problems(map, episodes, seed)``; the robot starts at the first
 problem's start, later episodes start where the previous one ended and head for the next
 problem's goal. An episode ends when the robot has been within ``goal_radius`` of the goal with
-the refiner stopped (goal reached) for ``hold_steps`` control steps, or after ``max_steps``
-control steps (max_steps / 10 s of simulated time); the next goal then starts the next episode.
-The episode reward therefore counts the steps within 0.5 m until the episode ends.
+zero commanded velocity (the refiner reached the goal) for ``hold_steps`` Table III steps
+(0.1 s of sim time each), or after ``max_steps`` steps; the next goal then starts the next
+episode. The episode reward therefore counts the steps within 0.5 m until the episode ends.
 
 Goal -> plan latency: per episode, the wall time (``time.perf_counter``) from publishing the
 goal to the demo node receiving the first ``plan`` that ends at that goal (None if none came
-before the episode ended); in DemoResult and in metrics.json as ``goal_to_plan_ms``.
+before the episode ended), across processes; in DemoResult and metrics.json as
+``goal_to_plan_ms``.
 
-After the last episode the bag is closed and scored by ``ecahd eval-bag``'s
-:func:`~ecahd_ros.eval_bag.evaluate_bag`: OUT/metrics.json, OUT/metrics.md,
+After the last episode the nodes get SIGINT, the bag is closed and scored by ``ecahd
+eval-bag``'s :func:`~ecahd_ros.eval_bag.evaluate_bag`: OUT/metrics.json, OUT/metrics.md,
 OUT/trajectories.png.
 """
 from __future__ import annotations
@@ -40,8 +47,8 @@ from pathlib import Path
 
 log = logging.getLogger("ecahd.demo")
 
-CONTROL_PERIOD = 0.1  # [s of sim time] the local refiner's default 10 Hz
-STARTUP_TIMEOUT = 120.0  # [s wall] models loaded and recorder subscribed
+STARTUP_TIMEOUT = 120.0  # [s wall] processes up, models loaded and recorder subscribed
+STOP_TIMEOUT = 10.0  # [s wall] a node process has this long to exit on SIGINT
 # [s wall] spinning after the last episode, simulator stopped, so the bag gets what is queued
 SETTLE_TIME = 0.5
 
@@ -55,7 +62,7 @@ class DemoConfig:
     robot: str = "circle"
     map: str = "maze2d-large"
     seed: int = 0
-    realtime_factor: float = 4.0
+    realtime_factor: float = 1.0
     max_steps: int = 800
     hold_steps: int = 10
     goal_radius: float = 0.5
@@ -72,9 +79,9 @@ class DemoConfig:
 
         if self.episodes < 1 or self.max_steps < 1 or self.hold_steps < 0:
             raise EcahdError("demo needs episodes >= 1, max_steps >= 1 and hold_steps >= 0")
-        if not math.isfinite(self.realtime_factor):
-            raise EcahdError(f"realtime_factor must be finite (<= 0: as fast as possible), got "
-                             f"{self.realtime_factor}")
+        if not (math.isfinite(self.realtime_factor) and self.realtime_factor > 0):
+            raise EcahdError(f"realtime_factor must be a finite number > 0 (planning runs "
+                             f"concurrently: there is no lock-step), got {self.realtime_factor}")
         if self.goals is not None and len(self.goals) < self.episodes:
             raise EcahdError(f"{self.episodes} episodes need as many goals, got {self.goals}")
 
@@ -99,8 +106,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--map", default="maze2d-large", help="built-in maze with shipped models")
     p.add_argument("--seed", type=int, default=0, help="seed of the goals and the samplers")
     p.add_argument("--out", default=None, help="output folder (default runs/demo-<timestamp>)")
-    p.add_argument("--realtime-factor", type=float, default=4.0,
-                   help="sim seconds per wall second (0: as fast as possible)")
+    p.add_argument("--realtime-factor", type=float, default=1.0,
+                   help="sim seconds per wall second (> 1: faster than real time, planning "
+                        "time scaled into sim time)")
     p.add_argument("--max-steps", type=int, default=800, help="control steps per episode")
     p.add_argument("--hold-steps", type=int, default=10,
                    help="control steps the reached goal is held before the next episode")
@@ -108,21 +116,68 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="ROS_DOMAIN_ID of the private context (default: from the process id)")
 
 
-def _node_parameters(config: DemoConfig, start) -> dict[str, list]:
-    from rclpy.parameter import Parameter
-
-    sim_time = Parameter("use_sim_time", value=True)
-    common = [Parameter("map_name", value=config.map), Parameter("robot", value=config.robot),
-              Parameter("seed", value=config.seed), sim_time]
+def _node_parameters(config: DemoConfig, start) -> dict[str, dict]:
+    """Each node's parameters (name -> value) for its params file."""
+    common = {"map_name": config.map, "robot": config.robot, "seed": config.seed,
+              "use_sim_time": True}
     return {
-        "sim": [Parameter("map", value=config.map), Parameter("robot", value=config.robot),
-                Parameter("start_x", value=float(start[0])),
-                Parameter("start_y", value=float(start[1])),
-                Parameter("realtime_factor", value=float(config.realtime_factor))],
-        "planner": common + [Parameter(k, value=v) for k, v in config.planner_params.items()],
-        "refiner": common + [Parameter(k, value=v) for k, v in config.refiner_params.items()],
-        "recorder": [Parameter("output", value=str(config.out / "bag")), sim_time],
+        "sim_bridge": {"map": config.map, "robot": config.robot, "start_x": float(start[0]),
+                       "start_y": float(start[1]),
+                       "realtime_factor": float(config.realtime_factor)},
+        "global_planner": {**common, **config.planner_params},
+        "local_refiner": {**common, **config.refiner_params},
     }
+
+
+NODE_MODULES = {"sim_bridge": "sim_bridge.node", "global_planner": "ecahd_ros.global_planner",
+                "local_refiner": "ecahd_ros.local_refiner"}
+
+
+class NodeProcess:
+    """One node in its own process, as ``ros2 run`` starts it: ``python -m MODULE --ros-args
+    --params-file F``, on ``domain``, its output in ``log_path``."""
+
+    def __init__(self, name: str, params: dict, *, domain: int, out: Path) -> None:
+        import subprocess
+        import sys
+
+        import yaml
+
+        self.name = name
+        params_file = out / "params" / f"{name}.yaml"
+        params_file.parent.mkdir(parents=True, exist_ok=True)
+        params_file.write_text(yaml.safe_dump({name: {"ros__parameters": params}}))
+        self.log_path = out / "logs" / f"{name}.log"
+        self.log_path.parent.mkdir(parents=True, exist_ok=True)
+        env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "PYTHONUNBUFFERED": "1",
+               "ROS_AUTOMATIC_DISCOVERY_RANGE": os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE",
+                                                               "LOCALHOST")}
+        self._log = open(self.log_path, "w")  # noqa: SIM115 (closed in stop())
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", NODE_MODULES[name], "--ros-args", "--params-file",
+             str(params_file)], stdout=self._log, stderr=subprocess.STDOUT, env=env)
+
+    def check(self) -> None:
+        """EcahdError if the process has exited (its log's last line says why)."""
+        from ecahd_core.errors import EcahdError
+
+        if self.proc.poll() is not None:
+            lines = self.log_path.read_text().strip().splitlines() or ["(no output)"]
+            raise EcahdError(f"{self.name} exited with code {self.proc.returncode}: "
+                             f"{lines[-1]} (log: {self.log_path})")
+
+    def stop(self) -> None:
+        import signal
+        import subprocess
+
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(timeout=STOP_TIMEOUT)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self._log.close()
 
 
 def _goals(config: DemoConfig):
@@ -142,19 +197,19 @@ def _goals(config: DemoConfig):
 
 
 def run_demo(config: DemoConfig) -> DemoResult:
-    """Run the episodes, close the bag, score it and write the outputs."""
+    """Start the node processes, run the episodes, close the bag, score it, write the outputs."""
     import rclpy
-    from geometry_msgs.msg import PoseStamped
+    from geometry_msgs.msg import PoseStamped, Twist
+    from nav_msgs.msg import Odometry
     from nav_msgs.msg import Path as PathMsg
     from rclpy.executors import SingleThreadedExecutor
+    from std_msgs.msg import String
 
     from ecahd_core.errors import EcahdError
+    from ecahd_core.evaluation import CONTROL_PERIOD, CONTROL_STAGE
     from ecahd_ros.bag_recorder import BagRecorder
     from ecahd_ros.eval_bag import evaluate_bag, write_outputs
-    from ecahd_ros.global_planner import GlobalPlanner
-    from ecahd_ros.qos import PLAN_QOS
-    from ecahd_ros.local_refiner import LocalRefiner
-    from sim_bridge.node import SimBridge
+    from ecahd_ros.qos import PLAN_QOS, STREAM_QOS
 
     start, goals = _goals(config)
     config.out.mkdir(parents=True, exist_ok=True)
@@ -162,23 +217,38 @@ def run_demo(config: DemoConfig) -> DemoResult:
     domain = config.domain_id if config.domain_id is not None else 1 + os.getpid() % 100
     ctx = rclpy.context.Context()
     rclpy.init(context=ctx, domain_id=domain)
+    procs: list[NodeProcess] = []
     nodes = []
     try:
-        sim = SimBridge(context=ctx, parameter_overrides=params["sim"])
-        nodes.append(sim)
-        if sim.sim is None:
-            raise EcahdError("the simulator did not start (see its log)")
-        planner = GlobalPlanner(context=ctx, parameter_overrides=params["planner"])
-        refiner = LocalRefiner(context=ctx, parameter_overrides=params["refiner"])
-        recorder = BagRecorder(context=ctx, parameter_overrides=params["recorder"])
+        # the recorder first, so it hears everything from the nodes' first message on
+        from rclpy.parameter import Parameter
+
+        recorder = BagRecorder(context=ctx, parameter_overrides=[
+            Parameter("output", value=str(config.out / "bag")),
+            Parameter("use_sim_time", value=True)])
         demo = rclpy.create_node("demo", context=ctx)
-        nodes += [planner, refiner, recorder, demo]
-        if recorder.bag_path is None or not recorder.recording:  # its log says why
-            raise EcahdError(f"cannot record into {config.out / 'bag'} (see the recorder's log)")
-        goal_pub = demo.create_publisher(PoseStamped, "goal_pose", 10)
+        nodes += [recorder, demo]
+        procs += [NodeProcess(name, params[name], domain=domain, out=config.out)
+                  for name in NODE_MODULES]
+        goal_pub = demo.create_publisher(PoseStamped, "goal_pose", STREAM_QOS)
+        state = {"odom": None, "cmd": None, "refiner_ready": False}
         # goal -> first plan latency of the current episode: goal (x, y), perf_counter when it
         # was published, the latency [ms] once its first plan arrived
         latency = {"goal": None, "sent": 0.0, "ms": None}
+
+        def on_odom(msg) -> None:
+            p = msg.pose.pose.position
+            state["odom"] = (p.x, p.y, msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9)
+
+        def on_cmd(msg) -> None:
+            state["cmd"] = (msg.linear.x, msg.angular.z)
+
+        def on_timing(msg) -> None:
+            import json
+
+            record = json.loads(msg.data)
+            if record.get("stage") == CONTROL_STAGE and record.get("map_ready"):
+                state["refiner_ready"] = True
 
         def on_plan(msg) -> None:
             if latency["goal"] is None or latency["ms"] is not None or not msg.poses:
@@ -187,54 +257,64 @@ def run_demo(config: DemoConfig) -> DemoResult:
             if math.hypot(end.x - latency["goal"][0], end.y - latency["goal"][1]) < 1e-6:
                 latency["ms"] = (time.perf_counter() - latency["sent"]) * 1e3
 
+        demo.create_subscription(Odometry, "odom", on_odom, STREAM_QOS)
+        demo.create_subscription(Twist, "cmd_vel", on_cmd, STREAM_QOS)
+        demo.create_subscription(String, "ecahd/timing", on_timing, STREAM_QOS)
         demo.create_subscription(PathMsg, "plan", on_plan, PLAN_QOS)
         goal_to_plan: list[float | None] = []
         executor = SingleThreadedExecutor(context=ctx)
         for node in nodes:
             executor.add_node(node)
 
-        # start-up: models loaded (on the latched map), every topic recorded
-        t0 = time.monotonic()
-        while not (planner.ready and refiner.planner is not None
-                   and not recorder.pending_topics and goal_pub.get_subscription_count() >= 2):
-            executor.spin_once(timeout_sec=0.01)
-            if time.monotonic() - t0 > STARTUP_TIMEOUT:
-                raise EcahdError(f"start-up took over {STARTUP_TIMEOUT:g} s: planner "
-                                 f"{planner.ready}, refiner "
-                                 f"{refiner.planner is not None}, recorder still waiting for "
-                                 f"{recorder.pending_topics}")
-        log.info("graph ready in %.1f s (domain %d); %d episodes", time.monotonic() - t0,
-                 domain, len(goals))
+        def spin(seconds: float = 0.01) -> None:
+            executor.spin_once(timeout_sec=seconds)
+            for proc in procs:
+                proc.check()
 
-        wall0, sim0 = time.monotonic(), sim.sim.state.t
+        # start-up: processes up, the refiner's cost map (and DD) on the latched map, the
+        # planner listening for goals (it queues one until its model is loaded), all recorded
+        t0 = time.monotonic()
+        while not (state["refiner_ready"] and state["odom"] is not None
+                   and not recorder.pending_topics and goal_pub.get_subscription_count() >= 2):
+            spin()
+            if time.monotonic() - t0 > STARTUP_TIMEOUT:
+                raise EcahdError(f"start-up took over {STARTUP_TIMEOUT:g} s: refiner ready "
+                                 f"{state['refiner_ready']}, odometry "
+                                 f"{state['odom'] is not None}, recorder still waiting for "
+                                 f"{recorder.pending_topics} (logs: {config.out / 'logs'})")
+        log.info("graph ready in %.1f s (domain %d, one process per node); %d episodes",
+                 time.monotonic() - t0, domain, len(goals))
+
+        wall0, sim0 = time.monotonic(), state["odom"][2]
         for i, goal in enumerate(goals):
             msg = PoseStamped()
             msg.header.frame_id = "map"
-            msg.header.stamp = planner.get_clock().now().to_msg()
+            msg.header.stamp = demo.get_clock().now().to_msg()
             msg.pose.position.x, msg.pose.position.y = float(goal[0]), float(goal[1])
             msg.pose.orientation.w = 1.0
             latency.update(goal=(float(goal[0]), float(goal[1])), ms=None)
             latency["sent"] = time.perf_counter()
+            state["cmd"] = None
             goal_pub.publish(msg)
-            t_start, held_since = sim.sim.state.t, None
-            s = sim.sim.state
-            log.info("episode %d: (%.2f, %.2f) -> (%.2f, %.2f)", i, s.x, s.y, goal[0], goal[1])
+            x, y, t_start = state["odom"]
+            held_since = None
+            log.info("episode %d: (%.2f, %.2f) -> (%.2f, %.2f)", i, x, y, goal[0], goal[1])
             while True:
-                executor.spin_once(timeout_sec=0.01)
-                s = sim.sim.state
-                steps = (s.t - t_start) / CONTROL_PERIOD
-                near = math.hypot(s.x - goal[0], s.y - goal[1]) < config.goal_radius
-                if near and refiner.waypoints is None:
-                    held_since = s.t if held_since is None else held_since
+                spin()
+                x, y, t = state["odom"]
+                steps = (t - t_start) / CONTROL_PERIOD
+                near = math.hypot(x - goal[0], y - goal[1]) < config.goal_radius
+                stopped = state["cmd"] is not None and state["cmd"] == (0.0, 0.0)
+                if near and stopped and latency["ms"] is not None:
+                    held_since = t if held_since is None else held_since
                 else:
                     held_since = None
                 if held_since is not None and \
-                        s.t - held_since >= config.hold_steps * CONTROL_PERIOD - 1e-9:
-                    log.info("episode %d: reached, %.0f control steps", i, steps)
+                        t - held_since >= config.hold_steps * CONTROL_PERIOD - 1e-9:
+                    log.info("episode %d: reached, %.0f steps", i, steps)
                     break
                 if steps >= config.max_steps - 1e-9:
-                    log.info("episode %d: %d control steps without reaching", i,
-                             config.max_steps)
+                    log.info("episode %d: %d steps without reaching", i, config.max_steps)
                     break
                 if time.monotonic() - wall0 > config.wall_timeout:
                     raise EcahdError(f"the episodes took over {config.wall_timeout:g} s wall "
@@ -242,8 +322,8 @@ def run_demo(config: DemoConfig) -> DemoResult:
             goal_to_plan.append(latency["ms"])
             if latency["ms"] is None:
                 log.warning("episode %d: no plan to the goal arrived", i)
-        wall_s, sim_s = time.monotonic() - wall0, sim.sim.state.t - sim0
-        executor.remove_node(sim)  # no more steps: the last episode ends here in the bag too
+        wall_s, sim_s = time.monotonic() - wall0, state["odom"][2] - sim0
+        procs[0].stop()  # the simulator first: the last episode ends here in the bag too
         t_end = time.monotonic()
         while time.monotonic() - t_end < SETTLE_TIME:
             executor.spin_once(timeout_sec=0.01)
@@ -251,6 +331,8 @@ def run_demo(config: DemoConfig) -> DemoResult:
         log.info("episodes: %.1f s wall for %.1f s of sim time (%.2fx real time)", wall_s, sim_s,
                  sim_s / max(wall_s, 1e-9))
     finally:
+        for proc in reversed(procs):
+            proc.stop()
         for node in reversed(nodes):
             node.destroy_node()  # the recorder's closes the bag (idempotent)
         rclpy.try_shutdown(context=ctx)

@@ -45,8 +45,8 @@ Publishes:
         outline at each local plan point (blue; red when the segment is blocked).
     ecahd/timing (std_msgs/String; reliable, depth 10): JSON {"stage": "j_check" | "dd", "ms",
         "c_before", "c_after", "safe", "stamp"} per segment ("dd" when DD ran; ms = the local
-        stage on the worker), and {"stage": "control", "ms", "reason", "stamp"} after every
-        control tick: the tick's wall time (``ecahd eval-bag`` reports its p50 / p99 apart from
+        stage on the worker), and {"stage": "control", "ms", "reason", "map_ready", "stamp"}
+        after every control tick: the tick's wall time (``ecahd eval-bag`` reports its p50 / p99 apart from
         inference time).
 """
 from __future__ import annotations
@@ -323,7 +323,8 @@ class LocalRefiner(Node):
             self.get_logger().info(f"control: {cmd.reason}")
         self._last_reason = cmd.reason
         self._timing_pub.publish(timing_message("control", ms, stamp.nanoseconds * 1e-9,
-                                                reason=cmd.reason))
+                                                reason=cmd.reason,
+                                                map_ready=self.planner is not None))
 
     def _on_event(self, kind: str, what, stamp) -> None:
         p = self.params
