@@ -5,9 +5,11 @@ Three kinds (all sizes in metres; the building's long axis follows the map's lon
 
 * ``warehouse``: long double-deep shelf rows along the long axis, each shelf a block 1.0-2.4 m deep
   and 6-15 m long whose interior is unknown (the laser only sees the rack outline, which is
-  occupied); parallel aisles 1.0-2.5 m wide between the rows, cross aisles 1.8-3.0 m wide, side
-  aisles 1.5-3.0 m along the walls, an open dock area 3-8 m deep at one short end with pallets and
-  2-5 dock doors 2.5-3.5 m wide onto a short apron outside.
+  occupied), now and then an empty bay with pallets on the floor; parallel aisles 1.0-2.5 m wide
+  (plus one cell) between the rows, cross aisles 1.8-3.0 m wide, side aisles 1.5-3.0 m along the
+  walls; an open dock area 3-8 m deep at one short end with pallets, a row of building columns,
+  an office room 3-4.5 x 2.5-3.5 m in one corner (door 0.9-1.0 m) and 2-5 dock doors 2.5-3.5 m
+  wide onto a short apron outside.
 * ``office``: one or two corridors 1.5-2.0 m wide along the long axis (joined by a lobby 3-7 m deep
   at one end on larger floors, else by a cross corridor), rooms 2.8-6 m long and 2.5-6 m deep on
   both sides, each with a door 0.9-1.0 m wide onto a corridor and sometimes a second door
@@ -15,8 +17,8 @@ Three kinds (all sizes in metres; the building's long axis follows the map's lon
   and then a locked room whose interior is unknown.
 * ``depot``: open floor with square pillars 0.4-0.6 m (occupied outline, unknown core) on a
   6-10 m grid, pairs of shelf blocks (1.0-2.0 m x 2-5 m) whose gap is either narrower (0.25-0.7 m)
-  or wider (0.95-1.6 m) than a 0.4-0.8 m robot, rows of pallets 0.3 m apart, and a rack row along
-  one long wall.
+  or wider (0.95-1.6 m, plus two cells) than a 0.4-0.8 m robot, rows of pallets 0.3 m apart,
+  loose boxes 0.4-1.0 m in the open bays, and a rack row along one long wall.
 
 All kinds get what a SLAM map has: walls 0.1-0.3 m thick whose thickness and faces jitter by up to
 0.05 m, ragged obstacle faces (single cells grown into free space, only where a cell is <= 0.05 m),
@@ -29,20 +31,27 @@ What is guaranteed, for every valid :class:`MapGenConfig` (checked by test/test_
 
 1. The free cells (value 0) form one 4-connected region: free pockets cut off by walls, furniture
    or speckle are turned unknown.
-2. For a circular robot of radius :data:`ROBOT_RADIUS` (0.4 m), the free cells whose clearance
-   (``maps.signed_distance``: cell centre to nearest obstacle edge, unknown counts as obstacle,
-   the map edge too) is >= 0.4 m form one 4-connected region: other such regions are turned
-   unknown. The A* expert's traversable mask (``AStarPlanner(grid, 0.4).mask``, the same clearance
-   made exact near the threshold) is a subset of that region.
-3. The designed passages stay open: door openings, aisles and gaps meant for the robot are
-   >= 0.9 m wide after all noise (no noise is added inside them), so every room, aisle and dock
-   is reached by the A* expert with clearance 0.4 m (``GeneratedMap.anchors`` holds one point in
-   each; locked rooms are unknown and have none). Depot gaps are drawn outside 0.7-0.95 m, so none
-   sits at the 0.8 m threshold where A*'s exact clearance and the distance transform can disagree.
+2. For a circular robot of radius :data:`ROBOT_RADIUS` (0.4 m): the free cells whose clearance
+   (``maps.signed_distance``: cell centre to nearest obstacle edge, unknown and the map edge
+   counting as obstacle) is >= 0.4 m + CORNER_ERROR (a quarter) cell form one 4-connected
+   region; other such regions are turned unknown. All of them lie in the A* expert's
+   traversable mask (``AStarPlanner(grid, 0.4).mask``, whose exact clearance is at most a quarter
+   cell below the distance transform's), so A* with clearance 0.4 m connects any two of them.
+3. By design, the passages meant for the robot stay >= 0.9 m wide: door openings and their
+   approaches get no noise and their jambs are redrawn after it, and aisles and wide depot gaps
+   are drawn one or two cells wider so that ragged faces (at most one cell each side) leave
+   0.9 m. So every room, aisle, dock and bay is reached by the A* expert with clearance 0.4 m:
+   ``GeneratedMap.anchors`` holds one point in each (locked rooms are unknown and have none);
+   the tests check them over seeds, sizes and resolutions. Should a layout still cut a room off,
+   the pass of 2 turns the room's floor unknown: 1 and 2 hold in every case. Depot gaps are drawn
+   outside 0.7-0.95 m, away from the 0.8 m threshold where A*'s exact clearance and the distance
+   transform can disagree.
 
-Not guaranteed: that A* finds a path between two points of region 2 that both lie within a cell
-or so of the 0.4 m threshold in a random nook (use a small clearance margin when sampling starts
-and goals), or that a larger robot reaches every room.
+Not guaranteed: that A* reaches a cell whose clearance is within a quarter cell above 0.4 m
+(such a cell may sit alone in a nook; sample starts and goals with clearance >= 0.4 m +
+resolution / 4), that a larger robot reaches every room, or exact door widths at resolutions
+coarser than 0.05 m/cell (a door is then widened to the cells the robot needs, see
+``_Canvas.passable_cells``).
 
 Same config -> byte-identical map (numpy ``default_rng(seed)`` and cv2 drawing only).
 """
@@ -356,10 +365,12 @@ class _Canvas:
         else:
             pts = [(x, y), (x + side * depth, y - half), (x + side * depth, y + half)]
         poly = np.array([[self.c(px), self.c(py)] for px, py in pts], dtype=np.int32)
-        outside = self.labels == _UNK
-        fan = np.zeros(self.labels.shape, dtype=np.uint8)
-        cv2.fillPoly(fan, [poly], 1)
-        self.labels[(fan > 0) & outside] = _FREE
+        c0, r0 = np.maximum(poly.min(axis=0), 0)
+        c1, r1 = poly.max(axis=0) + 1
+        window = self.labels[r0:r1, c0:c1]  # a view: only the fan's bounding box is touched
+        fan = np.zeros(window.shape, dtype=np.uint8)
+        cv2.fillPoly(fan, [poly - np.array([c0, r0], dtype=np.int32)], 1)
+        window[(fan > 0) & (window == _UNK)] = _FREE
 
     # -------------------------------------------------------------- building shell
     def hull(self, margin_min: float = 0.4, margin_max: float = 1.5,
@@ -463,6 +474,11 @@ def _warehouse(cv: _Canvas) -> None:
         if x + depth > zx1:
             break
         for b, (ya, yb) in enumerate(ys):
+            if rng.random() < 0.08 and not single:  # an empty rack bay: pallets on the floor
+                for py in np.arange(ya + 0.3, yb - 1.2, 1.5):
+                    if rng.random() < 0.6:
+                        cv.outline(x + 0.1, py, x + depth - 0.1, py + 1.0, interior=_OCC)
+                continue
             cv.outline(x, ya, x + depth, yb)
             if b < len(ys) - 1:  # anchor in the cross aisle after this block
                 cv.anchor(x + depth / 2, (yb + ys[b + 1][0]) / 2)
@@ -477,7 +493,26 @@ def _warehouse(cv: _Canvas) -> None:
     if zx1 - x >= 0.9:
         cv.anchor((x + ix1) / 2, (zy0 + zy1) / 2)
 
-    # 3. pallets on the dock floor, clear of doors, anchors and the shelf zone
+    # 3. an office room in a dock corner (door onto the dock) and building columns
+    if dock >= 4.0 and iw >= 14.0:
+        ow, od = rng.uniform(3.0, 4.5), min(dock - 1.5, rng.uniform(2.5, 3.5))
+        left = rng.random() < 0.5
+        ox0, ox1 = (ix0 - 0.2, ix0 + ow) if left else (ix1 - ow, ix1 + 0.2)
+        ti = 0.12
+        oy1 = iy0 + od
+        cv.wall_line(ox0, oy1, ox1, oy1, ti)
+        wx = ox1 if left else ox0
+        cv.wall_line(wx, iy0 - 0.2, wx, oy1, ti)
+        dwid = rng.uniform(0.9, 1.0)
+        cv.door((ox0 + ox1) / 2 + rng.uniform(-0.5, 0.5), oy1, dwid, along_x=True, thickness=ti)
+        cv.anchor((ox0 + ox1) / 2, iy0 + od / 2 - 0.1)
+    col_sp = rng.uniform(8.0, 12.0)
+    for x in np.arange(ix0 + col_sp, ix1 - 2.0, col_sp):
+        y = iy0 + dock - 1.0
+        if cv.free_rect(x - 0.7, y - 0.7, x + 0.7, y + 0.7):
+            cv.outline(x - 0.2, y - 0.2, x + 0.2, y + 0.2, edge=0.1)
+
+    # 4. pallets on the dock floor, clear of doors, anchors and the shelf zone
     for _ in range(int(rng.integers(3, 9))):
         pw, ph = (1.2, 1.0) if rng.random() < 0.5 else (1.0, 1.2)
         px = rng.uniform(ix0 + 0.3, ix1 - 0.3 - pw)
@@ -605,7 +640,7 @@ def _furnish(cv: _Canvas, room: tuple[float, float, float, float], side: int) ->
         dw, dd = rng.uniform(1.2, 1.6), rng.uniform(0.6, 0.8)
         xa = rng.uniform(x0 + 0.2, max(x0 + 0.21, x1 - dd - 0.2))
         ya = rng.uniform(y0 + 0.2, max(y0 + 0.21, y1 - dw - 0.2))
-        if not cv.free_rect(xa - 0.6, ya - 0.6, xa + dd + 0.6, ya + dw + 0.6):
+        if not cv.free_rect(xa - 0.6, ya - 0.6, xa + dd + 1.0, ya + dw + 0.6):  # chair incl.
             continue
         for lx in (xa, xa + dd):
             for ly in (ya, ya + dw):
@@ -648,12 +683,18 @@ def _depot(cv: _Canvas) -> None:
             if bx1 - bx0 < 2.0 or by1 - by0 < 2.0:
                 continue
             r = rng.random()
-            if r < 0.45:
+            if r < 0.5:
                 _shelf_pair(cv, bx0, by0, bx1, by1)
-            elif r < 0.65:
+            elif r < 0.7:
                 _pallet_row(cv, bx0, by0, bx1, by1)
             else:
-                cv.anchor((bx0 + bx1) / 2, (by0 + by1) / 2)
+                cx, cy = (bx0 + bx1) / 2, (by0 + by1) / 2
+                cv.anchor(cx, cy)
+                for _ in range(int(rng.integers(0, 4))):  # loose boxes and carts
+                    s = rng.uniform(0.4, 1.0)
+                    x, y = rng.uniform(bx0, bx1 - s), rng.uniform(by0, by1 - s)
+                    if cv.free_rect(x - 0.9, y - 0.9, x + s + 0.9, y + s + 0.9):
+                        cv.fill(x, y, x + s, y + s, _OCC)
 
 
 def _shelf_pair(cv: _Canvas, x0: float, y0: float, x1: float, y1: float) -> None:

@@ -160,8 +160,7 @@ def test_bad_config_raises_map_error(kwargs, match):
 
 
 def test_cli_generate_writes_nav2_map_and_png(tmp_path, capsys):
-    out = tmp_path / "sub" / "x.yaml"
-    out.parent.mkdir()
+    out = tmp_path / "sub" / "x.yaml"  # the folder is created
     assert main(["map", "generate", "--kind", "depot", "--size", "12", "10", "--resolution",
                  "0.05", "--seed", "2", "--out", str(out), "--png", str(tmp_path / "x.png")]) == 0
     line = capsys.readouterr().out.splitlines()[0]

@@ -65,6 +65,7 @@ def _describe(args: argparse.Namespace) -> int:
 
 def _generate(args: argparse.Namespace) -> int:
     import time
+    from pathlib import Path
 
     from ecahd_core.errors import MapError
     from ecahd_core.maps import save_nav2_yaml
@@ -79,6 +80,7 @@ def _generate(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     grid = generate_map(config)
     elapsed = time.perf_counter() - t0
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     path = save_nav2_yaml(grid, args.out)
     print(f"{_summary(grid)}, generated in {elapsed:.2f} s -> {path} "
           f"(+ {path.with_suffix('.pgm').name})")
