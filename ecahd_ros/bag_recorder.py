@@ -293,7 +293,7 @@ def read_bag(path, topics=None) -> dict[str, list[tuple[int, object]]]:
 
 
 def main(args=None) -> None:
-    spin_node(BagRecorder, args)
+    spin_node(BagRecorder, args, name="bag_recorder")
 
 
 if __name__ == "__main__":

@@ -49,7 +49,7 @@ class MapPublisher(Node):
 
 
 def main(args=None) -> None:
-    spin_node(MapPublisher, args)
+    spin_node(MapPublisher, args, name="map_publisher")
 
 
 if __name__ == "__main__":

@@ -68,6 +68,6 @@ def spin_node(make_node: Callable[[], Node], args=None, *, name: str = "node",
     try:
         spin_forever(executor, node.get_logger())
     finally:
-        executor.shutdown(timeout_sec=1.0)
+        executor.remove_node(node)
         node.destroy_node()
         rclpy.try_shutdown()
