@@ -174,6 +174,9 @@ class GlobalRunner:
         self._pending = False  # the goal still needs its first plan
         self._last_plan = -math.inf  # [s] when the last plan was accepted
         self._last_request = -math.inf  # [s] when the last goal plan was requested
+        self._forced: str | None = None  # a replan asked for by the local stage
+        self.blocked_count = 0  # "blocked" replans asked for since the goal arrived
+        self._hold = False  # the current goal's plan is followed to the end (a fallback)
 
     @property
     def active(self) -> bool:
@@ -190,9 +193,18 @@ class GlobalRunner:
         if not np.all(np.isfinite(g)):
             raise PlanningError(f"goal is not finite: {g.tolist()}")
         self.goal, self.waypoints, self.iteration, self._pending = g, None, 0, True
+        self._forced, self.blocked_count, self._hold = None, 0, False
 
     def cancel(self) -> None:
-        self.goal, self.waypoints, self._pending = None, None, False
+        self.goal, self.waypoints, self._pending, self._forced = None, None, False, None
+        self.blocked_count = 0
+
+    def request_replan(self, reason: str) -> None:
+        """The local stage cannot follow the plan (e.g. "blocked" by an unmapped obstacle):
+        the next :meth:`step` asks for a new plan from the robot's pose (same horizon)."""
+        if self.goal is not None:
+            self._forced = reason
+            self.blocked_count += reason == "blocked"
 
     def step(self, xy, now: float) -> PlanRequest | str | None:
         """The robot is at ``xy`` (2,) [m] at ``now`` [s]: a PlanRequest, "reached" or None."""
@@ -212,9 +224,12 @@ class GlobalRunner:
         if float(np.linalg.norm(xy - self.goal)) < c.waypoint_tolerance:
             self.cancel()
             return "reached"
-        if c.replan == "once":
-            return None
         horizon = max(2, c.horizon - self.iteration)
+        if self._forced is not None:
+            reason, self._forced = self._forced, None
+            return PlanRequest(xy, self.goal.copy(), horizon, reason)
+        if c.replan == "once" or self._hold:
+            return None
         if len(self.waypoints) > 2 and \
                 float(np.linalg.norm(xy - self.waypoints[1])) < c.waypoint_tolerance:
             self.iteration += 1  # MoveAgent reached t^g_p[1]: replan with P^g - p
@@ -225,11 +240,13 @@ class GlobalRunner:
             return PlanRequest(xy, self.goal.copy(), horizon, "timeout")
         return None
 
-    def accept(self, waypoints: np.ndarray, now: float) -> None:
-        """The plan (P, 2) [m] made for the last request."""
+    def accept(self, waypoints: np.ndarray, now: float, *, hold: bool = False) -> None:
+        """The plan (P, 2) [m] made for the last request; ``hold``: follow it to the goal with
+        no waypoint or timeout replans (a fallback path round a blockage)."""
         self.waypoints = np.asarray(waypoints, dtype=np.float64)
         self._pending = False
         self._last_plan = now
+        self._hold = self._hold or hold
 
     def fail(self) -> None:
         """Planning for the goal failed for good (an unreachable goal): drop it."""
@@ -342,7 +359,7 @@ class LocalRunner:
         self.segment = 0  # index of the waypoint the followed local plan ends at
         self.tracker: PathTracker | None = None  # the followed local plan
         self.current: SegmentResult | None = None
-        self._start: np.ndarray | None = None  # (2,) start of segment 1 of this plan
+        self._starts: dict[int, np.ndarray] = {}  # segment k -> its start when not W[k-1]
         self._jobs: dict[int, Future] = {}  # segment k of this generation -> its job
         self._reported: set[int] = set()  # segments of this generation whose result was reported
         self.v = 0.0  # [m/s] the last command
@@ -371,7 +388,7 @@ class LocalRunner:
             job.cancel()
         self.generation += 1
         self.waypoints, self.plan_time, self._jobs, self._reported = xy, now, {}, set()
-        self._start = (np.array(self.pose[:2]) if self.pose is not None else xy[0])
+        self._starts = {1: np.array(self.pose[:2]) if self.pose is not None else xy[0]}
         self._target = 1  # the next segment to take over (the followed one stays meanwhile)
         self._submit_ahead()
 
@@ -429,6 +446,46 @@ class LocalRunner:
         self.v = v
         return Command(v, w, "follow")
 
+    def recheck(self, judge: Callable[[np.ndarray], bool]) -> int:
+        """The world changed (a scan saw something): ``judge(plan (P, 2)) -> safe`` re-judges
+        the rest of the followed local plan and every prepared one. A followed plan no longer
+        safe is dropped (zero velocity) and its segment refined again from the robot's pose; a
+        prepared one is refined again. Returns how many plans were invalidated."""
+        if self.waypoints is None:
+            return 0
+        invalid = 0
+        if self.tracker is not None and self.pose is not None:
+            ahead = np.concatenate([np.array(self.pose[:2])[None],
+                                    self.tracker.points[self.tracker.index:]])
+            if not judge(ahead):
+                invalid += 1
+                k = self.segment
+                self.tracker = self.current = None
+                self._target = k
+                self._starts[k] = np.array(self.pose[:2])
+                self._resubmit(k)
+        for k, job in list(self._jobs.items()):
+            if k < self._target or k == self.segment and self.tracker is not None:
+                continue
+            if not job.done() or job.cancelled() or job.exception() is not None:
+                continue
+            if job.result().safe and not judge(job.result().plan):
+                invalid += 1
+                self._resubmit(k)
+            elif not job.result().safe and k == self._target and self.tracker is None \
+                    and self.pose is not None:  # blocked: the world changed, try again
+                self._starts[k] = np.array(self.pose[:2])
+                self._resubmit(k)
+        return invalid
+
+    def _resubmit(self, k: int) -> None:
+        old = self._jobs.pop(k, None)
+        if old is not None:
+            old.cancel()
+        self._reported.discard(k)
+        a, b = self._segment_ends(k)
+        self._jobs[k] = self._submit(self._job(a.copy(), b.copy()))
+
     def pop_events(self) -> list[tuple[str, object]]:
         events, self.events = self.events, []
         return events
@@ -443,8 +500,7 @@ class LocalRunner:
         return Command(0.0, 0.0, reason)
 
     def _segment_ends(self, k: int) -> tuple[np.ndarray, np.ndarray]:
-        start = self._start if k == 1 else self.waypoints[k - 1]
-        return start, self.waypoints[k]
+        return self._starts.get(k, self.waypoints[k - 1]), self.waypoints[k]
 
     def _submit_ahead(self) -> None:
         """Jobs for segments _target .. _target + prepare_ahead not yet submitted."""
@@ -501,13 +557,26 @@ class SegmentRefiner:
         self.planner, self.grid, self.footprint = planner, grid, footprint
         self.generator = generator
 
+    def set_world(self, grid, costmap) -> None:
+        """Judge on ``grid`` and guide DD / polishing by ``costmap`` from now on (the static map
+        fused with what the scans see: :class:`ecahd_core.sensing.LocalWorld`)."""
+        self.grid, self.planner.costmap = grid, costmap
+
+    def judge(self, plan: np.ndarray) -> bool:
+        """The exact checker's verdict on ``plan`` (P, 2): collision-free, or starting in contact
+        and going no deeper (it leads out)."""
+        from ecahd_core.collision import check_collision
+
+        report = check_collision(plan, self.footprint, self.grid)
+        return bool(report.collision_free or (
+            report.colliding[0] and float(report.depths[1:].max(initial=0.0))
+            <= float(report.depths[0]) + 1e-6))
+
     def __call__(self, a: np.ndarray, b: np.ndarray) -> SegmentResult:
         """a, b: (2,) [m] -> SegmentResult (plan (P^l, 2) [m] float64)."""
         import time
 
         import torch
-
-        from ecahd_core.collision import check_collision
 
         t0 = time.perf_counter()
         stage = self.planner.local_stage(torch.as_tensor(a, dtype=torch.float32),
@@ -515,10 +584,7 @@ class SegmentRefiner:
                                          end_fixed=True, generator=self.generator)
         plan = stage.plan.detach().numpy().astype(np.float64)
         plan[0], plan[-1] = a, b  # exact ends (the models work in float32)
-        report = check_collision(plan, self.footprint, self.grid)
-        safe = bool(report.collision_free or (
-            report.colliding[0] and float(report.depths[1:].max(initial=0.0))
-            <= float(report.depths[0]) + 1e-6))
+        safe = self.judge(plan)
         return SegmentResult(plan=plan, c_before=stage.c_before, c_after=stage.c_after,
                              stage="dd" if stage.dd_used else "j_check", safe=safe,
                              ms=(time.perf_counter() - t0) * 1e3, polished=stage.polished)

@@ -15,7 +15,11 @@ from ecahd_core.maps import GridMap, from_occupancy_grid, to_occupancy_grid
 
 def grid_to_msg(grid: GridMap, stamp: Time | None = None) -> OccupancyGrid:
     """GridMap -> nav_msgs/OccupancyGrid (row-major from the origin, -1 unknown, 0..100)."""
-    layout = to_occupancy_grid(grid)
+    return layout_to_msg(to_occupancy_grid(grid), stamp)
+
+
+def layout_to_msg(layout, stamp: Time | None = None) -> OccupancyGrid:
+    """An OccupancyGridLayout (``ecahd_core.maps``) -> nav_msgs/OccupancyGrid."""
     msg = OccupancyGrid()
     msg.header.frame_id = layout.frame_id
     if stamp is not None:

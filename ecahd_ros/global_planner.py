@@ -214,6 +214,12 @@ class GlobalPlanner(Node):
         self.create_subscription(PoseStamped, "goal_pose", self._guard(self._on_goal),
                                  STREAM_QOS)
         self.create_subscription(Odometry, "odom", self._guard(self._on_odom), STREAM_QOS)
+        self.create_subscription(OccupancyGrid, "local_costmap",
+                                 self._guard(self._on_local_costmap), VIZ_QOS)
+        self.create_subscription(String, "ecahd/replan", self._guard(self._on_replan),
+                                 STREAM_QOS)
+        self.local = None  # GridMap of the refiner's latest local costmap window
+        self.fallbacks = 0  # A* fallbacks after repeated "blocked" replans
         # a goal coalesced in a burst is planned within one period even without odometry
         self.create_timer(p.runner_config().min_plan_interval, self._guard(self._on_pending))
         what = f"SD, N={p.num_candidates}, P^g={p.horizon}" if p.method == "sd" else p.method
@@ -330,6 +336,36 @@ class GlobalPlanner(Node):
         self.pose = np.array([x, y])
         self._step()
 
+    def _on_local_costmap(self, msg: OccupancyGrid) -> None:
+        if msg.header.frame_id != self.params.global_frame:
+            raise EcahdError(f"local_costmap in frame {msg.header.frame_id!r} ignored: expected "
+                             f"{self.params.global_frame!r}")
+        self.local = msg_to_grid(msg, name="local_costmap", unknown_is_occupied=False)
+
+    def _on_replan(self, msg: String) -> None:
+        """The refiner cannot follow the plan (a segment blocked by a scanned obstacle)."""
+        import json
+
+        try:
+            reason = str(json.loads(msg.data).get("reason", "blocked"))
+        except (ValueError, AttributeError):
+            raise EcahdError(f"ecahd/replan ignored: not a JSON object: {msg.data[:80]!r}") \
+                from None
+        if self.runner.goal is None:
+            return
+        self.runner.request_replan(reason)
+        self._step()
+
+    def _fused_grid(self):
+        """The static map with the local costmap's marked cells occupied, or the static map."""
+        from ecahd_core.sensing import fuse_grid
+
+        if self.local is None or self.grid is None \
+                or abs(self.local.resolution - self.grid.resolution) > 1e-9:
+            return self.grid
+        return fuse_grid(self.grid, self.local.data >= self.local.occupied_threshold,
+                         self.local.origin)
+
     def _on_pending(self) -> None:
         if self.runner.pending:
             self._step()
@@ -361,9 +397,22 @@ class GlobalPlanner(Node):
                 self.runner.fail()
             raise PlanningError(f"cannot plan: {exc}") from None
         method, result, detail = self.params.method, None, ""
-        if method == "sd":
-            result = self.sparse.plan(start, goal, horizon=request.horizon,
-                                      generator=self.generator)
+        blocked = request.reason == "blocked"
+        if blocked and (method != "sd" or self.runner.blocked_count >= 2):
+            method = "fallback_astar"  # SD could not get round it: A* on what is known
+            waypoints, ms = self._plan_fallback(start, goal)
+        elif method == "sd":
+            saved = self.sparse.cost
+            if blocked and saved is not None:  # weigh the candidates by J with the scans too
+                from ecahd_core.cost import CollisionCost
+
+                self.sparse.cost = CollisionCost.build(self._fused_grid(),
+                                                       self.footprint).as_tuple()
+            try:
+                result = self.sparse.plan(start, goal, horizon=request.horizon,
+                                          generator=self.generator)
+            finally:
+                self.sparse.cost = saved
             waypoints, ms = result.waypoints.copy(), result.time_ms
             detail = f" (candidate {result.best} of {len(result.candidates)})"
         elif method == "astar":
@@ -374,7 +423,7 @@ class GlobalPlanner(Node):
             ms = (time.perf_counter() - t0) * 1e3
         waypoints[0], waypoints[-1] = start, goal  # exact ends (the models work in float32)
         stamp = self.get_clock().now()
-        self.runner.accept(waypoints, stamp.nanoseconds * 1e-9)
+        self.runner.accept(waypoints, stamp.nanoseconds * 1e-9, hold=method == "fallback_astar")
         self._plan_pub.publish(xy_to_path(waypoints, self.params.global_frame, stamp.to_msg()))
         if result is not None:
             self._cand_pub.publish(candidate_markers(result, self.params.global_frame,
@@ -383,6 +432,21 @@ class GlobalPlanner(Node):
                                                 horizon=len(waypoints)))
         self.get_logger().info(f"{method} plan of {len(waypoints)} points to "
                                f"({goal[0]:.2f}, {goal[1]:.2f}) in {ms:.1f} ms{detail}")
+
+    def _plan_fallback(self, start: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, float]:
+        """A* with the footprint's clearance on the static map fused with the local costmap
+        (a detour round a scanned blockage), from the nearest pose with clearance."""
+        from ecahd_core.astar import AStarPlanner, clearance_for_footprint, plan_from_pose
+        from ecahd_core.controller import resample
+
+        t0 = time.perf_counter()
+        planner = AStarPlanner(self._fused_grid(), clearance_for_footprint(self.footprint))
+        path = resample(plan_from_pose(planner, start, goal), ASTAR_SPACING)
+        self.fallbacks += 1
+        self.get_logger().warning(
+            f"replan after {self.runner.blocked_count} blocked segment(s): fallback to A* on "
+            f"the map fused with the local costmap ({self.fallbacks} fallback(s) so far)")
+        return path, (time.perf_counter() - t0) * 1e3
 
     def _plan_astar(self, start: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, float]:
         """A* from ``start`` to ``goal`` -> (path (N, 2) [m], ASTAR_SPACING apart at most;

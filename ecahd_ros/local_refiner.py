@@ -58,6 +58,7 @@ from dataclasses import dataclass
 import numpy as np
 from geometry_msgs.msg import Point, Twist, TwistStamped
 from nav_msgs.msg import OccupancyGrid, Odometry, Path
+from sensor_msgs.msg import LaserScan
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from std_msgs.msg import String
@@ -66,12 +67,12 @@ from visualization_msgs.msg import Marker, MarkerArray
 from ecahd_core.errors import EcahdError
 from ecahd_core.navigation import LocalRunner, LocalRunnerConfig, SegmentResult
 from ecahd_core.planner import DenseConfig
-from ecahd_ros.conversions import (msg_to_grid, path_to_xy, timing_message, xy_to_path,
-                                   yaw_from_quaternion)
+from ecahd_ros.conversions import (layout_to_msg, msg_to_grid, path_to_xy, timing_message,
+                                   xy_to_path, yaw_from_quaternion)
 from ecahd_ros.params import (ParamSpec, declare_parameters, make_robot,
                               on_parameter_change, read_parameters, require,
                               require_non_negative, require_positive, shared)
-from ecahd_ros.qos import MAP_QOS, PLAN_QOS, STREAM_QOS, VIZ_QOS
+from ecahd_ros.qos import MAP_QOS, PLAN_QOS, SCAN_QOS, STREAM_QOS, VIZ_QOS
 from ecahd_ros.spin import spin_node
 
 PARAMETERS = [
@@ -99,6 +100,23 @@ PARAMETERS = [
     ParamSpec("plan_timeout", 0.0, "[s] a plan older than this stops the robot; 0 = never "
                                    "(dynamic)"),
     ParamSpec("enable_stamped_cmd_vel", False, "publish geometry_msgs/TwistStamped on cmd_vel"),
+    ParamSpec("use_scan", True, "fuse 'scan' into a rolling local costmap that J and the exact "
+                                "check read (obstacles not on the map)"),
+    ParamSpec("local_costmap_size", 6.0, "[m] side of the rolling local costmap window"),
+    ParamSpec("obstacle_persistence", 2.0, "[s] a scanned obstacle not seen again for this long "
+                                           "is forgotten; 0 = until a ray clears it"),
+    ParamSpec("local_costmap_rate", 2.0, "[Hz] publishing rate of 'local_costmap'"),
+    ParamSpec("scan_offset_x", 0.0, "[m] the scanner's x on base_link (as sim_bridge's)"),
+    ParamSpec("scan_offset_y", 0.0, "[m] the scanner's y on base_link"),
+    ParamSpec("scan_offset_yaw", 0.0, "[rad] the scanner's yaw on base_link"),
+    ParamSpec("collision_monitor", True, "stop / slow down any cmd_vel whose footprint, swept "
+                                         "over monitor_time_to_collision, hits a scan point"),
+    ParamSpec("monitor_time_to_collision", 1.0, "[s] horizon of the collision monitor"),
+    ParamSpec("monitor_stop_margin", 0.02, "[m] footprint growth that stops the robot"),
+    ParamSpec("monitor_slowdown_margin", 0.3, "[m] footprint growth that slows the robot down"),
+    ParamSpec("monitor_slowdown_ratio", 0.3, "v and w are scaled by this when slowing down"),
+    ParamSpec("monitor_source_timeout", 0.5, "[s] scans older than this (after the first) stop "
+                                             "the robot"),
     *shared("seed", "torch_threads"),
 ]
 DYNAMIC = ("max_v", "max_w", "max_accel", "lookahead", "waypoint_tolerance", "goal_tolerance",
@@ -129,6 +147,19 @@ class LocalRefinerParams:
     stale_timeout: float
     plan_timeout: float
     enable_stamped_cmd_vel: bool
+    use_scan: bool
+    local_costmap_size: float
+    obstacle_persistence: float
+    local_costmap_rate: float
+    scan_offset_x: float
+    scan_offset_y: float
+    scan_offset_yaw: float
+    collision_monitor: bool
+    monitor_time_to_collision: float
+    monitor_stop_margin: float
+    monitor_slowdown_margin: float
+    monitor_slowdown_ratio: float
+    monitor_source_timeout: float
     seed: int
     torch_threads: int
 
@@ -137,7 +168,14 @@ class LocalRefinerParams:
                          "waypoint_tolerance", "goal_tolerance", "stale_timeout",
                          "torch_threads")
         require_non_negative(self, "c_th", "footprint_padding", "plan_timeout", "seed",
-                             "polish_steps", "prepare_ahead")
+                             "polish_steps", "prepare_ahead", "obstacle_persistence")
+        require_positive(self, "local_costmap_size", "local_costmap_rate",
+                         "monitor_time_to_collision", "monitor_source_timeout")
+        require(0 < self.monitor_slowdown_ratio <= 1, "monitor_slowdown_ratio",
+                self.monitor_slowdown_ratio, "in (0, 1]")
+        require(0 <= self.monitor_stop_margin <= self.monitor_slowdown_margin,
+                "monitor_stop_margin", self.monitor_stop_margin,
+                ">= 0 and <= monitor_slowdown_margin")
         require(bool(self.global_frame), "global_frame", self.global_frame, "non-empty")
 
     def runner_config(self) -> LocalRunnerConfig:
@@ -147,6 +185,25 @@ class LocalRefinerParams:
             waypoint_tolerance=self.waypoint_tolerance, goal_tolerance=self.goal_tolerance,
             stale_timeout=self.stale_timeout, plan_timeout=self.plan_timeout,
             prepare_ahead=self.prepare_ahead)
+
+    def local_costmap_config(self):
+        from ecahd_core.local_costmap import LocalCostmapConfig
+
+        return LocalCostmapConfig(size=self.local_costmap_size,
+                                  persistence=self.obstacle_persistence)
+
+    def monitor_config(self):
+        from ecahd_core.collision_monitor import CollisionMonitorConfig
+
+        return CollisionMonitorConfig(
+            time_to_collision=self.monitor_time_to_collision,
+            stop_margin=self.monitor_stop_margin, slowdown_margin=self.monitor_slowdown_margin,
+            slowdown_ratio=self.monitor_slowdown_ratio,
+            source_timeout=self.monitor_source_timeout)
+
+    @property
+    def scan_offset(self) -> tuple[float, float, float]:
+        return self.scan_offset_x, self.scan_offset_y, self.scan_offset_yaw
 
 
 def footprint_markers(footprint, local: np.ndarray, frame_id: str, stamp,
@@ -198,11 +255,22 @@ class LocalRefiner(Node):
         self.planner = None  # HierarchicalPlanner (its local stage only) once a map arrives
         self._lock = threading.Lock()  # the runner is shared by the callback threads
         self.runner = LocalRunner(p.runner_config())
+        self.world = None  # ecahd_core.sensing.LocalWorld once a map arrives (use_scan)
+        self.refiner = None  # ecahd_core.navigation.SegmentRefiner once a map arrives
+        self.monitor = None
+        if p.collision_monitor:
+            from ecahd_core.collision_monitor import CollisionMonitor
+
+            self.monitor = CollisionMonitor(self.footprint, p.monitor_config())
+        self.counters = {"monitor_stop": 0, "monitor_slowdown": 0, "blocked": 0,
+                         "rechecks_invalidated": 0, "scans": 0}
         self._cmd_type = TwistStamped if p.enable_stamped_cmd_vel else Twist
         self._cmd_pub = self.create_publisher(self._cmd_type, "cmd_vel", STREAM_QOS)
         self._local_pub = self.create_publisher(Path, "local_plan", VIZ_QOS)
         self._fp_pub = self.create_publisher(MarkerArray, "local_plan_footprints", VIZ_QOS)
         self._timing_pub = self.create_publisher(String, "ecahd/timing", STREAM_QOS)
+        self._replan_pub = self.create_publisher(String, "ecahd/replan", STREAM_QOS)
+        self._costmap_pub = self.create_publisher(OccupancyGrid, "local_costmap", VIZ_QOS)
         inputs, maps = MutuallyExclusiveCallbackGroup(), MutuallyExclusiveCallbackGroup()
         control = MutuallyExclusiveCallbackGroup()
         self.create_subscription(Path, "plan", self._guard(self._on_plan), PLAN_QOS,
@@ -213,6 +281,12 @@ class LocalRefiner(Node):
                                  callback_group=maps)
         self._timer = self.create_timer(1.0 / p.control_rate, self._guard(self._on_control),
                                         callback_group=control)
+        if p.use_scan:
+            sensing = MutuallyExclusiveCallbackGroup()
+            self.create_subscription(LaserScan, "scan", self._guard(self._on_scan), SCAN_QOS,
+                                     callback_group=sensing)
+            self.create_timer(1.0 / p.local_costmap_rate, self._guard(self._publish_costmap),
+                              callback_group=sensing)
         on_parameter_change(self, PARAMETERS, lambda: self.params, self._apply_params)
         self._last_reason = None
         dd = f"DD above c_th={p.c_th:g}" if p.dd_enabled else "DD disabled"
@@ -273,10 +347,15 @@ class LocalRefiner(Node):
             cost_config=cost.config,
             dense=DenseConfig(points=self.points, c_th=p.c_th, enabled=p.dd_enabled,
                               polish_steps=p.polish_steps))
+        refiner = SegmentRefiner(planner, grid, self.footprint, generator=self.generator)
+        world = None
+        if p.use_scan:
+            from ecahd_core.sensing import LocalWorld
+
+            world = LocalWorld(grid, cost, p.local_costmap_config(), offset=p.scan_offset)
         with self._lock:
-            self.grid, self.planner = grid, planner
-            self.runner.refine = SegmentRefiner(planner, grid, self.footprint,
-                                                generator=self.generator)
+            self.grid, self.planner, self.refiner, self.world = grid, planner, refiner, world
+            self.runner.refine = refiner
             self.runner.reset_costs()  # the current plan's segments are refined on this map
         self.get_logger().info(f"map {grid.name!r} received; "
                                f"{'DD model and ' if p.dd_enabled else ''}cost J ready")
@@ -308,13 +387,59 @@ class LocalRefiner(Node):
             except EcahdError as exc:
                 raise EcahdError(f"odometry ignored: {exc}") from None
 
+    def _on_scan(self, msg: LaserScan) -> None:
+        """Fuse the scan into the local costmap; re-judge the followed and prepared local plans
+        on the fused map (a newly blocked one is refined again, guided by the fused J)."""
+        from ecahd_core.sensing import Scan
+
+        if self.world is None or self.runner.pose is None:
+            return
+        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        try:
+            scan = Scan(ranges=msg.ranges, angle_min=msg.angle_min,
+                        angle_increment=msg.angle_increment, range_min=msg.range_min,
+                        range_max=msg.range_max, stamp=stamp)
+        except EcahdError as exc:
+            raise EcahdError(f"scan ignored: {exc}") from None
+        with self._lock:
+            pose = self.runner.pose
+        self.world.add_scan(pose, scan)
+        self.counters["scans"] += 1
+        if not self.world.stale:
+            return
+        grid, costmap = self.world.fused()
+        with self._lock:
+            self.refiner.set_world(grid, costmap)
+            invalid = self.runner.recheck(self.refiner.judge)
+        if invalid:
+            self.counters["rechecks_invalidated"] += invalid
+            self.get_logger().info(f"scan: {invalid} local plan(s) now in collision with a "
+                                   "scanned obstacle: refining again")
+
+    def _publish_costmap(self) -> None:
+        if self.world is None:
+            return
+        layout = self.world.window.to_occupancy(self.params.global_frame)
+        self._costmap_pub.publish(layout_to_msg(layout, self.get_clock().now().to_msg()))
+
     def _on_control(self) -> None:
         """The control tick: the runner's bounded tick, cmd_vel, then what happened."""
         t0 = time.perf_counter()
+        now = self._now()
         with self._lock:
-            cmd = self.runner.tick(self._now())
+            cmd = self.runner.tick(now)
             events = self.runner.pop_events()
-        self._publish_cmd(cmd.v, cmd.w)
+            pose = self.runner.pose
+        v, w, action = cmd.v, cmd.w, "none"
+        world = self.world
+        if self.monitor is not None and world is not None and world.points_stamp is not None \
+                and pose is not None:  # the last line of defence, once scans flow
+            guarded = self.monitor.filter(pose, v, w, world.points, world.points_stamp, now)
+            v, w, action = guarded.v, guarded.w, guarded.action
+            if action != "none":
+                self.counters[f"monitor_{action}"] += 1
+                self.runner.v = v  # the controller ramps up from what was really commanded
+        self._publish_cmd(v, w)
         ms = (time.perf_counter() - t0) * 1e3
         stamp = self.get_clock().now()
         for kind, what in events:
@@ -323,7 +448,7 @@ class LocalRefiner(Node):
             self.get_logger().info(f"control: {cmd.reason}")
         self._last_reason = cmd.reason
         self._timing_pub.publish(timing_message("control", ms, stamp.nanoseconds * 1e-9,
-                                                reason=cmd.reason,
+                                                reason=cmd.reason, monitor=action,
                                                 map_ready=self.planner is not None))
 
     def _on_event(self, kind: str, what, stamp) -> None:
@@ -336,9 +461,15 @@ class LocalRefiner(Node):
             return
         result: SegmentResult = what
         if kind == "blocked":
+            self.counters["blocked"] += 1
             self.get_logger().warning(
                 "segment blocked: its local plan (after DD and polishing) is in collision by "
-                "the exact checker; stopped until a new plan arrives")
+                "the exact checker; stopped, asking global_planner for a new plan")
+            import json
+
+            x, y = (float(v) for v in result.plan[0])
+            self._replan_pub.publish(String(data=json.dumps(
+                {"reason": "blocked", "x": x, "y": y, "stamp": stamp.nanoseconds * 1e-9})))
         self._local_pub.publish(xy_to_path(result.plan, p.global_frame, stamp.to_msg()))
         self._fp_pub.publish(footprint_markers(self.footprint, result.plan, p.global_frame,
                                                stamp.to_msg(), colliding=not result.safe))

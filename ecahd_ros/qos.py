@@ -6,10 +6,12 @@
     STREAM_QOS  odom, cmd_vel, goal_pose, clock, collision, scan, ecahd/timing: reliable,
                 volatile, depth 10.
     VIZ_QOS     RViz-only topics (markers, local_plan, camera): reliable, volatile, depth 1.
+    SCAN_QOS    scan subscriptions: rclpy's sensor-data profile (best effort, depth 5), which
+                matches reliable and best-effort LiDAR drivers alike.
 """
 from __future__ import annotations
 
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
 MAP_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -17,3 +19,4 @@ PLAN_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 STREAM_QOS = QoSProfile(depth=10)
 VIZ_QOS = QoSProfile(depth=1)
+SCAN_QOS = qos_profile_sensor_data
