@@ -545,7 +545,8 @@ class SegmentRefiner:
     DD above c_th, keep-better, polishing; both ends fixed) judged by the exact checker.
 
     A local plan that starts in contact (the robot already touches a wall) is safe when it goes
-    no deeper than its start: it leads out.
+    no deeper than its start: it leads out. With ``exact`` False every plan counts as safe (the
+    paper's ablations, which follow straight segments whatever they hit).
 
     Args:
         planner: a HierarchicalPlanner (only its local stage is used).
@@ -553,9 +554,10 @@ class SegmentRefiner:
         generator: the DD sampler's torch.Generator (a seed reproduces the plans).
     """
 
-    def __init__(self, planner, grid, footprint, *, generator=None) -> None:
+    def __init__(self, planner, grid, footprint, *, generator=None, exact: bool = True) -> None:
         self.planner, self.grid, self.footprint = planner, grid, footprint
         self.generator = generator
+        self.exact = exact  # False: every plan counts as safe (the paper's ablations)
 
     def set_world(self, grid, costmap) -> None:
         """Judge on ``grid`` and guide DD / polishing by ``costmap`` from now on (the static map
@@ -567,6 +569,8 @@ class SegmentRefiner:
         and going no deeper (it leads out)."""
         from ecahd_core.collision import check_collision
 
+        if not self.exact:
+            return True
         report = check_collision(plan, self.footprint, self.grid)
         return bool(report.collision_free or (
             report.colliding[0] and float(report.depths[1:].max(initial=0.0))

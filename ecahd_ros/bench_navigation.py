@@ -2,14 +2,17 @@
 driven through the same seeded goals by the same ROS 2 graph.
 
 Every variant is one ``ecahd demo`` run (:func:`ecahd_ros.demo.run_demo`: sim_bridge,
-global_planner, local_refiner and bag_recorder in one process, on a fresh ROS domain), the
+global_planner, local_refiner each in its own process at real time, bag_recorder in the
+benchmark process, on a fresh ROS domain), the
 same map, robot, seed (hence goals and start) and controller; only the nodes' parameters
 differ (:data:`VARIANTS`):
 
     ECAHD w/ DD           global_planner method sd, local_refiner dd_enabled true (the paper's)
-    ECAHD w/o DD          sd, dd_enabled false: the straight local plans are followed
+    ECAHD w/o DD          sd, dd_enabled false, exact_check false: the straight local plans
+                          are followed, whatever they hit (the paper's ablation)
     A* + controller       astar (one whole A* path per goal), dd_enabled false
-    FD, no local planner  fd (one 100-point Full Diffusion path per goal), dd_enabled false
+    FD, no local planner  fd (one 100-point Full Diffusion path per goal), dd_enabled false,
+                          exact_check false
 
 Each bag is scored by ``ecahd eval-bag`` (``ecahd_core.evaluation``): episode reward, first
 reach, collision rate (% of sim steps in contact; and the exact swept-footprint checker's share
@@ -57,9 +60,11 @@ class Variant:
 
 VARIANTS: tuple[Variant, ...] = (
     Variant("ecahd", "ECAHD w/ DD", {"method": "sd"}, {"dd_enabled": True}),
-    Variant("ecahd-no-dd", "ECAHD w/o DD", {"method": "sd"}, {"dd_enabled": False}),
+    Variant("ecahd-no-dd", "ECAHD w/o DD", {"method": "sd"},
+            {"dd_enabled": False, "exact_check": False}),
     Variant("astar", "A* + controller", {"method": "astar"}, {"dd_enabled": False}),
-    Variant("fd", "FD, no local planner", {"method": "fd"}, {"dd_enabled": False}),
+    Variant("fd", "FD, no local planner", {"method": "fd"},
+            {"dd_enabled": False, "exact_check": False}),
 )
 VARIANT_KEYS = tuple(v.key for v in VARIANTS)
 
@@ -378,4 +383,7 @@ def add_bench_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run_bench(args: argparse.Namespace) -> int:
-    return benchmarks()[args.benchmark].run(args)
+    """Run ``args.benchmark`` after its ``--threads`` is applied (``ecahd_core.commands.bench``)."""
+    from ecahd_core.commands.bench import run as run_core_bench
+
+    return run_core_bench(args, benchmarks())

@@ -84,6 +84,10 @@ PARAMETERS = [
                                   "plans (ECAHD w/o DD; J still checked for the diagnostics)"),
     ParamSpec("polish_steps", DenseConfig().polish_steps,
               "J-descent steps on a DD local plan still above c_th (ours); 0 = the paper"),
+    ParamSpec("exact_check", True, "never follow a local plan the exact checker finds in "
+                                   "collision (ours); false: the paper's ablations (ECAHD w/o "
+                                   "DD, FD without a local planner) drive straight segments "
+                                   "into walls"),
     ParamSpec("control_rate", 20.0, "[Hz] cmd_vel rate (Nav2's controller_frequency default)"),
     ParamSpec("prepare_ahead", 2, "segments refined ahead of the one being followed"),
     ParamSpec("max_v", 0.5, "[m/s] limit on |linear velocity| (dynamic)"),
@@ -136,6 +140,7 @@ class LocalRefinerParams:
     c_th: float
     dd_enabled: bool
     polish_steps: int
+    exact_check: bool
     control_rate: float
     prepare_ahead: int
     max_v: float
@@ -347,7 +352,8 @@ class LocalRefiner(Node):
             cost_config=cost.config,
             dense=DenseConfig(points=self.points, c_th=p.c_th, enabled=p.dd_enabled,
                               polish_steps=p.polish_steps))
-        refiner = SegmentRefiner(planner, grid, self.footprint, generator=self.generator)
+        refiner = SegmentRefiner(planner, grid, self.footprint, generator=self.generator,
+                                 exact=p.exact_check)
         world = None
         if p.use_scan:
             from ecahd_core.sensing import LocalWorld
