@@ -3,10 +3,12 @@
     ecahd bench cost [--json FILE] [--repeats N] [--threads T]   the cost J, batched vs loops
     ecahd bench sampling [--json FILE]        SD / DD / FD latency next to the paper's figures
     ecahd bench sd-quality [--problems 128]   SD alone: goal reach, collision-free (point robot)
+    ecahd bench contention [--quick]          plan latency quiet vs beside a CPU hog
 
 ``BENCHMARKS`` maps each name to its argument builder and runner; a new benchmark (sampling,
-planning, ...) is one more entry. torch is only imported when a benchmark runs, so
-``ecahd --help`` stays fast.
+planning, ...) is one more entry. Every benchmark takes ``--threads T`` (one definition,
+``ecahd_core.threads``; default 1, 0: torch's default), applied before it runs. torch is only
+imported when a benchmark runs, so ``ecahd --help`` stays fast.
 """
 from __future__ import annotations
 
@@ -16,9 +18,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+from ecahd_core.bench import contention as bench_contention
 from ecahd_core.bench import monitor as bench_monitor
 from ecahd_core.bench.cost import CostBenchSettings
 from ecahd_core.errors import EcahdError
+from ecahd_core.threads import add_threads_argument, set_torch_threads
 
 
 @dataclass(frozen=True)
@@ -58,9 +62,6 @@ def _add_cost_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--loop-repeats", type=_int_at_least(0), default=d.loop_repeats,
                         metavar="N", help="timed runs of the literal loop reference "
                                           "(seconds each); 0 skips it")
-    parser.add_argument("--threads", type=_int_at_least(0), default=d.threads, metavar="T",
-                        help="torch intra-op threads during the benchmark; 0 keeps torch's "
-                             "default")
     parser.add_argument("--batch", type=_int_at_least(1), default=d.batch, metavar="B",
                         help="trajectories per call of J")
     parser.add_argument("--horizon", type=_int_at_least(1), default=d.horizon, metavar="P",
@@ -100,8 +101,6 @@ def _add_sampling_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--robot", default="circle", help="footprint for the guided runs")
     parser.add_argument("--repeats", type=_int_at_least(1), default=20, metavar="N",
                         help="timed runs per measurement (the median is reported)")
-    parser.add_argument("--threads", type=_int_at_least(0), default=0, metavar="T",
-                        help="torch intra-op threads; 0 keeps torch's default")
     parser.add_argument("--json", metavar="FILE", help="also write the result as JSON to FILE")
 
 
@@ -199,9 +198,11 @@ def _add_planning_arguments(parser: argparse.ArgumentParser) -> None:
                              "(the paper's rule; ours keeps the cheaper)")
     parser.add_argument("--replan", default=d.replan, choices=("every_waypoint", "once"),
                         help="HD: SD best-of-N at every waypoint (Algorithm 1) or once")
+    parser.add_argument("--warm-fraction", type=float, default=d.warm_fraction, metavar="F",
+                        help="HD every_waypoint: warm-start each re-plan from the previous plan, "
+                             "running the last F (0..1) of the DDIM schedule (default: from "
+                             "noise)")
     parser.add_argument("--no-ablation", action="store_true", help="skip Table II")
-    parser.add_argument("--threads", type=_int_at_least(0), default=1,
-                        help="torch threads (0: torch's default)")
     parser.add_argument("--json", metavar="FILE", help="one record per cell")
     parser.add_argument("--md", metavar="FILE", help="Table I / Table II as markdown")
     parser.add_argument("--png", metavar="FILE", help="one problem planned by every method")
@@ -212,10 +213,6 @@ def _run_planning(args: argparse.Namespace) -> int:
     from ecahd_core.bench.planning import (PlanningBenchSettings, format_markdown, plot_examples,
                                            run_planning_benchmark)
 
-    if args.threads:
-        import torch
-
-        torch.set_num_threads(args.threads)
     settings = PlanningBenchSettings(
         map=args.map, problems=args.problems, seed=args.seed, sample_seed=args.sample_seed,
         robots=tuple(args.robots), methods=tuple(args.methods), candidates=args.candidates,
@@ -223,6 +220,7 @@ def _run_planning(args: argparse.Namespace) -> int:
         guidance_weight=args.omega, guidance_space=args.guidance_space, margin=args.margin,
         c_th=args.c_th, dd_retries=args.dd_retries, polish_steps=args.polish_steps,
         keep_better=not args.no_keep_better, replan=args.replan,
+        warm_fraction=args.warm_fraction,
         ablation=not args.no_ablation)
     result = run_planning_benchmark(settings, progress=not args.no_progress)
     md = format_markdown(result)
@@ -239,6 +237,15 @@ def _run_planning(args: argparse.Namespace) -> int:
     return 0
 
 
+# ------------------------------------------------------------------------------ contention
+def _run_contention(args: argparse.Namespace) -> int:
+    result = bench_contention.run_contention_benchmark(bench_contention.settings_from_args(args))
+    print(bench_contention.format_table(result))
+    if args.json:
+        _write_json(args.json, result.to_dict())
+    return 0
+
+
 BENCHMARKS: dict[str, Benchmark] = {
     "cost": Benchmark(help="forward+backward time of the cost J: batched torch vs literal loops",
                       add_arguments=_add_cost_arguments, run=_run_cost),
@@ -251,6 +258,9 @@ BENCHMARKS: dict[str, Benchmark] = {
     "monitor": Benchmark(help="collision monitor filter and local costmap update + fusion: "
                               "p50/p99 per call against their budgets",
                          add_arguments=bench_monitor.add_arguments, run=bench_monitor.run),
+    "contention": Benchmark(help="plan latency (SD best-of-10, Alg. 1 replan once) quiet and "
+                                 "beside a CPU hog, with 1 torch thread and with every core",
+                            add_arguments=bench_contention.add_arguments, run=_run_contention),
 }
 
 
@@ -264,7 +274,24 @@ def add_arguments(parser: argparse.ArgumentParser,
         p = sub.add_parser(name, help=bench.help, description=bench.help,
                            formatter_class=argparse.ArgumentDefaultsHelpFormatter)
         bench.add_arguments(p)
+        try:
+            add_threads_argument(p)
+            p.set_defaults(threads_set_by_benchmark=False)
+        except argparse.ArgumentError:  # the benchmark has its own --threads and applies it
+            p.set_defaults(threads_set_by_benchmark=True)
 
 
-def run(args: argparse.Namespace) -> int:
-    return BENCHMARKS[args.benchmark].run(args)
+def run(args: argparse.Namespace, benchmarks: dict[str, Benchmark] | None = None) -> int:
+    """Run ``args.benchmark`` of ``benchmarks`` (default :data:`BENCHMARKS`) with torch's
+    threads set from ``--threads`` (0: torch's default), restored afterwards."""
+    bench = (benchmarks or BENCHMARKS)[args.benchmark]
+    if not args.threads or args.threads_set_by_benchmark:
+        return bench.run(args)
+    import torch
+
+    previous = torch.get_num_threads()
+    set_torch_threads(args.threads)
+    try:
+        return bench.run(args)
+    finally:
+        torch.set_num_threads(previous)

@@ -5,6 +5,8 @@
 
 Defaults come from ``ecahd_core.model_zoo.RECIPES``; ``--device cuda`` trains on a GPU, and the
 same command under ``torchrun --nproc_per_node N`` trains with DistributedDataParallel.
+``--threads N`` sets torch's CPU threads on purpose (``ecahd_core.threads``; default: every core
+this process may use).
 """
 from __future__ import annotations
 
@@ -12,6 +14,8 @@ import argparse
 import logging
 import time
 from pathlib import Path
+
+from ecahd_core.threads import add_threads_argument, set_torch_threads, training_threads
 
 log = logging.getLogger("ecahd.train")
 
@@ -21,8 +25,7 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device", default="cpu", help="cpu, cuda, cuda:1, ...")
     p.add_argument("--steps-scale", type=float, default=1.0,
                    help="multiply every recipe's step count (and warm-up) by this")
-    p.add_argument("--threads", type=int, default=0,
-                   help="torch CPU threads (0: torch's default)")
+    add_threads_argument(p, default=None)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -80,11 +83,9 @@ def train_one(kind: str, dataset, *, out: Path, seed: int, device: str, steps: i
     return result
 
 
-def _set_threads(n: int) -> None:
-    if n > 0:
-        import torch
-
-        torch.set_num_threads(n)
+def _set_threads(n: int | None) -> None:
+    """``--threads``: n torch threads (None: every core, :func:`training_threads`)."""
+    set_torch_threads(training_threads() if n is None else n)
 
 
 def run(args: argparse.Namespace) -> int:
