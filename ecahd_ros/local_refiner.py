@@ -45,8 +45,9 @@ Publishes:
         outline at each local plan point (blue; red when the segment is blocked).
     ecahd/timing (std_msgs/String; reliable, depth 10): JSON {"stage": "j_check" | "dd", "ms",
         "c_before", "c_after", "safe", "stamp"} per segment ("dd" when DD ran; ms = the local
-        stage on the worker), and {"stage": "control", "ms", "reason", "map_ready", "stamp"}
-        after every control tick: the tick's wall time (``ecahd eval-bag`` reports its p50 / p99 apart from
+        stage on the worker), and {"stage": "control", "ms", "reason", "monitor",
+        "map_ready", "wall", "stamp"} after every control tick (``wall``: time.time() [s] at
+        publishing, for the inter-publish jitter; ``monitor``: none / slowdown / stop): the tick's wall time (``ecahd eval-bag`` reports its p50 / p99 apart from
         inference time).
 """
 from __future__ import annotations
@@ -455,7 +456,8 @@ class LocalRefiner(Node):
         self._last_reason = cmd.reason
         self._timing_pub.publish(timing_message("control", ms, stamp.nanoseconds * 1e-9,
                                                 reason=cmd.reason, monitor=action,
-                                                map_ready=self.planner is not None))
+                                                map_ready=self.planner is not None,
+                                                wall=time.time()))
 
     def _on_event(self, kind: str, what, stamp) -> None:
         p = self.params

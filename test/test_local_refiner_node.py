@@ -183,7 +183,8 @@ def test_every_control_tick_publishes_its_wall_time(rig):
     control = [json.loads(m.data) for m in r.timings if json.loads(m.data)["stage"] == "control"]
     assert len(control) >= len(cmds) - 1  # one per tick (a record follows its command)
     for c in control:
-        assert c["ms"] >= 0 and math.isfinite(c["stamp"]) and set(c) == {"stage", "ms", "stamp", "reason", "monitor", "map_ready"}
+        assert c["ms"] >= 0 and math.isfinite(c["stamp"]) and set(c) == {"stage", "ms", "stamp", "reason", "monitor", "map_ready",
+                                                      "wall"}
 
 
 def test_zero_without_a_plan(rig):
