@@ -44,6 +44,12 @@ class SparseConfig:
         guidance: guide SD itself by J towards G (the "SD with guidance" baseline of Table I;
             ECAHD leaves SD unguided).
         guidance_weight: omega when ``guidance``.
+        warm_fraction: warm-started re-planning (ours, beyond the paper): a re-plan
+            (:meth:`SparseDiffusion.replan`; HierarchicalPlanner's ``every_waypoint`` loop) starts
+            from the rest of the previous plan, noised to the DDIM step where the last
+            ``warm_fraction`` (0..1) of the schedule begins, and runs only those steps
+            (diffusion.sampler, "Warm start"). None: every plan samples from noise (Algorithm 1
+            as written). A goal's first plan always samples from noise.
     """
 
     num_candidates: int = 10
@@ -56,8 +62,12 @@ class SparseConfig:
     guidance: bool = False
     guidance_weight: float = 1.0
     guidance_space: str = "eps"
+    warm_fraction: float | None = None
 
     def __post_init__(self) -> None:
+        if self.warm_fraction is not None and not 0.0 <= self.warm_fraction <= 1.0:
+            raise EcahdError(f"warm_fraction must lie in 0..1 (or None: off), "
+                             f"got {self.warm_fraction}")
         if self.selection not in SELECTION_RULES:
             raise EcahdError(f"selection rule {self.selection!r} is not one of "
                              f"{list(SELECTION_RULES)}")
@@ -141,10 +151,27 @@ class SparseDiffusion:
         self.cost = cost
 
     def plan(self, start, goal, *, horizon: int | None = None,
-             generator: torch.Generator | None = None) -> SparsePlan:
-        """start, goal: (2,) [m] -> SparsePlan with waypoints (horizon, 2) from start to goal."""
+             generator: torch.Generator | None = None, warm_start=None,
+             warm_fraction: float | None = None) -> SparsePlan:
+        """start, goal: (2,) [m] -> SparsePlan with waypoints (horizon, 2) from start to goal.
+
+        ``warm_start`` (horizon, 2) [m]: start the N candidates from this trajectory (its ends are
+        replaced by start and goal) noised to the last ``warm_fraction`` of the DDIM schedule
+        (default ``config.warm_fraction``) instead of from noise; see :meth:`replan`."""
         cfg = self.config
         horizon = horizon or cfg.horizon
+        if warm_start is not None:
+            warm_fraction = cfg.warm_fraction if warm_fraction is None else warm_fraction
+            if warm_fraction is None:
+                raise EcahdError("a warm start needs warm_fraction (here or in SparseConfig)")
+            if not 0.0 <= warm_fraction <= 1.0:
+                raise EcahdError(f"warm_fraction must lie in 0..1, got {warm_fraction}")
+            warm_start = np.asarray(warm_start, dtype=np.float32)
+            if warm_start.shape != (horizon, 2):
+                raise EcahdError(f"warm_start must have shape ({horizon}, 2) [m], "
+                                 f"got {warm_start.shape}")
+        else:
+            warm_fraction = None
         t0 = time.perf_counter()
         start_t = torch.as_tensor(np.asarray(start, dtype=np.float32), device=self.sampler.device)
         goal_t = torch.as_tensor(np.asarray(goal, dtype=np.float32), device=self.sampler.device)
@@ -159,7 +186,9 @@ class SparseDiffusion:
                 guide = CostJGuide(costmap, fp, goal_t, cost_config)
             cands = self.sampler.sample(batch=cfg.num_candidates, horizon=horizon,
                                         conditions={0: start_t, -1: goal_t},
-                                        generator=generator, guide=guide).trajectories
+                                        generator=generator, guide=guide,
+                                        warm_start=warm_start,
+                                        warm_fraction=warm_fraction).trajectories
         col = None
         if cfg.selection == "collision_aware":
             from ecahd_core.cost import trajectory_cost
@@ -175,6 +204,25 @@ class SparseDiffusion:
                            collision_tolerance=cfg.collision_tolerance)
         return SparsePlan(waypoints=cands_np[best], candidates=cands_np, best=best,
                           collision_costs=col, time_ms=(time.perf_counter() - t0) * 1e3)
+
+    def replan(self, start, goal, previous=None, *, horizon: int | None = None,
+               generator: torch.Generator | None = None) -> SparsePlan:
+        """Re-plan from ``start`` (2,) [m] to ``goal`` (2,) [m] while following ``previous``
+        (P, 2) [m], the current plan (None: no plan yet).
+
+        With warm starts on (``config.warm_fraction`` not None) and ``previous`` at least
+        ``horizon`` long, the candidates start from its last ``horizon`` waypoints with the
+        first replaced by ``start`` (Algorithm 1's P^g - p remaining waypoints after reaching
+        waypoint p; the whole plan after a timeout), see :meth:`plan`. Otherwise this is
+        :meth:`plan` from noise, bit for bit."""
+        horizon = horizon or self.config.horizon
+        warm = None
+        if self.config.warm_fraction is not None and previous is not None and horizon > 2:
+            previous = np.asarray(previous, dtype=np.float64).reshape(-1, 2)
+            if len(previous) >= horizon:
+                warm = previous[len(previous) - horizon:].copy()
+                warm[0] = np.asarray(start, dtype=np.float64).reshape(2)
+        return self.plan(start, goal, horizon=horizon, generator=generator, warm_start=warm)
 
 
 # ----------------------------------------------------------------------- Algorithms 1 and 2
@@ -292,7 +340,8 @@ class HierarchicalPlanner:
         costmap, footprint_points, cost_config: the cost J (Algorithm 2 lines 11-25).
         dense: DenseConfig.
         replan: "every_waypoint" (Algorithm 1: SD best-of-N again from each reached waypoint,
-            horizon P^g - p) or "once" (ours, faster: SD best-of-N once, then its remaining
+            horizon P^g - p; warm-started from the previous plan when
+            ``sparse.config.warm_fraction`` is set) or "once" (ours, faster: SD best-of-N once, then its remaining
             waypoints are the global plan of every later iteration; in a static known map the
             replanned distribution is the same, so this trades resampling for ~P^g times less SD
             work).
@@ -433,8 +482,10 @@ class HierarchicalPlanner:
             return self._plan_once(S, G, generator, t_total)
         for p in range(P_g - 1):  # Algorithm 1 line 1 (the last iteration reaches G)
             t0 = time.perf_counter()
-            waypoints = self.sparse.plan(S.numpy(), G.numpy(), horizon=P_g - p,
-                                         generator=generator).waypoints  # lines 2-12
+            waypoints = self.sparse.replan(S.numpy(), G.numpy(),
+                                           global_plans[-1] if global_plans else None,
+                                           horizon=P_g - p,
+                                           generator=generator).waypoints  # lines 2-12
             times["sd"] += (time.perf_counter() - t0) * 1e3
             wp = torch.as_tensor(waypoints, dtype=torch.float32)
             stage = self.local_stage(wp[0], wp[1], end_fixed=p == P_g - 2,

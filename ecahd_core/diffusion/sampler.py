@@ -25,6 +25,13 @@ Gradients: without a guide the whole loop runs under ``torch.inference_mode()``;
 runs under ``torch.no_grad()`` and only the guide's J evaluation runs under ``enable_grad`` on a
 detached copy of the sample, so no graph ever reaches the network parameters.
 
+Warm start (ours, for re-planning; ``warm_start`` and ``warm_steps``): instead of z_K ~ N(0, I),
+a known trajectory x_w (e.g. the rest of the previous plan) is normalised, inpainted and noised
+to the timestep t_j of the last ``warm_steps`` DDIM steps by the forward process (SDEdit, Meng et
+al. 2022): z_{t_j} = sqrt(alpha_bar_{t_j}) x_w + sqrt(1 - alpha_bar_{t_j}) eps, eps ~ N(0, I)
+(:meth:`NoiseSchedule.add_noise`), then only those steps run, inpainting as above. 0 steps
+returns x_w with its conditions imposed; all steps is sampling from (almost) pure noise.
+
 Batching: ``batch`` rows are denoised in one forward pass per step. For N candidates of B
 problems, give per-row conditions (B * N, 2), e.g. from
 :func:`~ecahd_core.diffusion.conditioning.expand_conditions` (problem-major rows).
@@ -65,7 +72,8 @@ class SampleOutput:
     Attributes:
         trajectories: (B, P, 2) [m] the final samples, conditions exact.
         normalized: (B, P, 2) the same in the normalised space.
-        timesteps: the DDIM timesteps used, noisiest first (S of them).
+        timesteps: the DDIM timesteps run, noisiest first (S of them; with a warm start the
+            last S of the schedule).
         guided_steps: the step indices at which guidance was applied.
         guide_costs: (G, B) J at each guided step (evaluated on z_k), or None without a guide.
         intermediates: (S + 1, B, P, 2) [m] z_K then every z after each step, or None.
@@ -125,7 +133,8 @@ def sample(model: Denoiser, scheduler: DDIMScheduler, normalizer: Normalizer, *,
            guide_steps: GuideSteps | None = None, return_intermediates: bool = False,
            model_kwargs: Mapping[str, Any] | None = None,
            max_guide_norm: float | None = DEFAULT_MAX_GUIDE_NORM,
-           guidance_space: str = "eps") -> SampleOutput:
+           guidance_space: str = "eps", warm_start: Any = None,
+           warm_steps: int | None = None) -> SampleOutput:
     """Sample ``batch`` trajectories of ``horizon`` waypoints with inpainting and optional guidance.
 
     Args:
@@ -155,6 +164,10 @@ def sample(model: Denoiser, scheduler: DDIMScheduler, normalizer: Normalizer, *,
         guide_steps: at which steps to guide (default: all), see :data:`GuideSteps`.
         return_intermediates: also return every z_k and predicted x_0.
         model_kwargs: extra model inputs, e.g. {"map_feature": (1, d_model)}.
+        warm_start: (P, 2) or (B, P, 2) [m] a trajectory to start from instead of pure noise
+            (see the module docstring), or None.
+        warm_steps: with ``warm_start``, how many of the last DDIM steps of the ``num_steps``
+            schedule to run (0..num_steps); the start is noised to the first of them.
     Returns:
         :class:`SampleOutput`.
     """
@@ -162,9 +175,13 @@ def sample(model: Denoiser, scheduler: DDIMScheduler, normalizer: Normalizer, *,
         raise ValueError(f"guidance_space {guidance_space!r} is not one of {list(GUIDANCE_SPACES)}")
     if batch < 1 or horizon < 2:
         raise ValueError(f"need batch >= 1 and horizon >= 2, got batch={batch}, horizon={horizon}")
+    if (warm_start is None) != (warm_steps is None):
+        raise ValueError("warm_start and warm_steps go together")
     device = _device_of(model, scheduler)
     model_kwargs = dict(model_kwargs or {})
     timesteps = scheduler.set_timesteps(num_steps)
+    if warm_steps is not None:
+        timesteps = scheduler.last_timesteps(warm_steps)
     is_guided = _guided_predicate(guide_steps, len(timesteps)) if guide is not None else None
     # No graph at all without a guide; with one, only the J evaluation below re-enables grad.
     context = torch.inference_mode() if guide is None else torch.no_grad()
@@ -177,11 +194,16 @@ def sample(model: Denoiser, scheduler: DDIMScheduler, normalizer: Normalizer, *,
             # conditions re-imposed in metres: bit-exact, unlike the float32 round trip
             return apply_conditioning(normalizer.unnormalize(zk), cond_m)
 
-        z = torch.randn((batch, horizon, 2), generator=generator, device=device)  # z_K
+        if warm_start is None:
+            z = torch.randn((batch, horizon, 2), generator=generator, device=device)  # z_K
+        else:
+            z = _warm_start_sample(warm_start, timesteps, scheduler, normalizer, cond_m,
+                                   batch, horizon, device, generator)  # z_{t_j}
         z = apply_conditioning(z, cond)
         xs, x0s, costs, guided = [z], [], [], []
+        t_batches = torch.tensor(timesteps, dtype=torch.long, device=device)[:, None]  # (S, 1)
         for i, t in enumerate(timesteps):
-            t_batch = torch.full((batch,), t, dtype=torch.long, device=device)
+            t_batch = t_batches[i].expand(batch)  # (B,)
             eps = model(z, t_batch, **model_kwargs)  # (B, P, 2)
             if is_guided is not None and is_guided(i, t):
                 weight = guidance_weight
@@ -211,6 +233,25 @@ def sample(model: Denoiser, scheduler: DDIMScheduler, normalizer: Normalizer, *,
             guide_costs=torch.stack(costs) if costs else None,
             intermediates=torch.stack([to_metres(v) for v in xs]) if return_intermediates else None,
             pred_x0=torch.stack([to_metres(v) for v in x0s]) if return_intermediates else None)
+
+
+def _warm_start_sample(warm_start: Any, timesteps: tuple[int, ...], scheduler: DDIMScheduler,
+                       normalizer: Normalizer, cond_m: Mapping[int, Tensor], batch: int,
+                       horizon: int, device: torch.device,
+                       generator: torch.Generator | None) -> Tensor:
+    """The warm start x_w (P, 2) or (B, P, 2) [m], conditions imposed, normalised and noised
+    to ``timesteps[0]`` (q(x_t | x_0)); unchanged when no step is left. -> (B, P, 2)."""
+    x = torch.as_tensor(warm_start, dtype=torch.float32, device=device)
+    if x.shape not in ((horizon, 2), (batch, horizon, 2)):
+        raise TrajectoryError(f"warm_start must have shape ({horizon}, 2) or "
+                              f"({batch}, {horizon}, 2) [m], got {tuple(x.shape)}")
+    if not torch.isfinite(x).all():
+        raise TrajectoryError("warm_start is not finite")
+    x0 = normalizer.normalize(apply_conditioning(x.expand(batch, horizon, 2), cond_m))
+    if not timesteps:
+        return x0
+    noise = torch.randn((batch, horizon, 2), generator=generator, device=device)
+    return scheduler.add_noise(x0, noise, timesteps[0])
 
 
 def _evaluate_guide(guide: Guide, traj_m: Tensor, batch: int, horizon: int) -> GuideOutput:
@@ -284,14 +325,26 @@ class DiffusionSampler:
     def sample(self, *, batch: int, horizon: int, conditions: Mapping[int, Any],
                generator: torch.Generator | None = None, guide: Guide | None = None,
                guide_steps: GuideSteps | None = None, return_intermediates: bool = False,
-               model_kwargs: Mapping[str, Any] | None = None) -> SampleOutput:
-        """:func:`sample` with this sampler's model and settings."""
+               model_kwargs: Mapping[str, Any] | None = None, warm_start: Any = None,
+               warm_fraction: float | None = None) -> SampleOutput:
+        """:func:`sample` with this sampler's model and settings. A warm start (``warm_start``
+        (P, 2) or (B, P, 2) [m]) runs the last ``warm_fraction`` (0..1) of the DDIM schedule."""
+        warm_steps = None
+        if (warm_start is None) != (warm_fraction is None):
+            raise ValueError("warm_start and warm_fraction go together")
+        if warm_fraction is not None:
+            self.scheduler.set_timesteps(self.config.num_steps)
+            warm_steps = self.scheduler.warm_steps(warm_fraction)
+        if guide_steps is None and self.config.guide_last:
+            last = self.config.guide_last  # of the schedule: a warm start may run fewer steps
+            last = last if warm_steps is None else min(last, warm_steps)
+            guide_steps = set(range(-last, 0)) if last else None
         return sample(self.model, self.scheduler, self.normalizer, batch=batch, horizon=horizon,
                       conditions=conditions, num_steps=self.config.num_steps, eta=self.config.eta,
                       generator=generator, guide=guide,
                       guidance_weight=self.config.guidance_weight,
-                      guide_steps=(guide_steps if guide_steps is not None or not self.config.guide_last
-                                   else set(range(-self.config.guide_last, 0))),
+                      guide_steps=guide_steps,
                       max_guide_norm=self.config.max_guide_norm,
                       guidance_space=self.config.guidance_space,
-                      return_intermediates=return_intermediates, model_kwargs=model_kwargs)
+                      return_intermediates=return_intermediates, model_kwargs=model_kwargs,
+                      warm_start=warm_start, warm_steps=warm_steps)

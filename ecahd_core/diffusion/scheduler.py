@@ -236,6 +236,26 @@ class DDIMScheduler(NoiseSchedule):
         self._prev = {t: (ts[i + 1] if i + 1 < n else -1) for i, t in enumerate(ts)}
         return self._timesteps
 
+    def last_timesteps(self, n: int) -> tuple[int, ...]:
+        """The last n timesteps of the current schedule, noisiest first (0 <= n <= the number
+        of steps): where a warm-started sample, noised to the first of them, is denoised."""
+        if not self._timesteps:
+            raise RuntimeError("call set_timesteps(n) before last_timesteps()")
+        S = len(self._timesteps)
+        if isinstance(n, bool) or int(n) != n or not 0 <= n <= S:
+            raise ValueError(f"the last n timesteps need n in 0..{S} (the schedule's steps), "
+                             f"got {n}")
+        return self._timesteps[S - int(n):]
+
+    def warm_steps(self, fraction: float) -> int:
+        """How many of the current schedule's steps a warm start of ``fraction`` (0..1 of the
+        schedule, counted in steps) runs: round(fraction * S)."""
+        if not self._timesteps:
+            raise RuntimeError("call set_timesteps(n) before warm_steps()")
+        if not 0.0 <= fraction <= 1.0:
+            raise ValueError(f"a warm-start fraction must lie in 0..1, got {fraction}")
+        return int(round(fraction * len(self._timesteps)))
+
     def previous_timestep(self, t: int) -> int:
         """The timestep after t in the current schedule (-1 = the clean data)."""
         if not self._timesteps:
