@@ -56,6 +56,8 @@ MOTIONS: tuple[tuple[int, int, float], ...] = (
 SDF_TOLERANCE = 1e-6  # [m] a clearance that falls short by less than this still counts
 CORNER_ERROR = 0.25  # [cells] bound on the overestimate of maps.signed_distance ((sqrt 2 - 1) / 2)
 _LOS_CHUNK = 32  # path vertices tested for line of sight per vectorised block when smoothing
+COARSE_LANDMARKS = 8  # landmarks of the coarse A*'s ALT heuristic
+COARSE_WEIGHT = 1.0  # weighted A* on the coarse graph (1.0: the shortest chain)
 
 
 @dataclass(frozen=True)
@@ -295,23 +297,29 @@ class AStarPlanner:
         through a grid corner, all four cells around the corner count as touched (the rule that
         keeps A*'s diagonal steps off blocked corners).
         """
+        return self.visible_segments(a, bs)
+
+    def visible_segments(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """:meth:`visible` for M segments a[i] -> b[i]: a (2,) or (M, 2) [m], b (M, 2) [m] ->
+        (M,) bool."""
         res = self.grid.resolution
         origin = np.asarray(self.grid.origin)
-        p = (np.asarray(a, dtype=np.float64) - origin) / res  # (2,) [cells]
-        q = (np.asarray(bs, dtype=np.float64) - origin) / res  # (M, 2) [cells]
+        p = (np.asarray(a, dtype=np.float64) - origin) / res  # (2,) or (M, 2) [cells]
+        q = (np.asarray(b, dtype=np.float64) - origin) / res  # (M, 2) [cells]
+        p_col = p[..., None, :]  # (1, 2) or (M, 1, 2): one start per segment
         d = q - p  # (M, 2)
         # 1. parameters t in [0, 1] of the end points and of the crossings of the grid lines
         #    x = k and y = k; NaN pads segments that cross fewer lines than others
         ts = [np.zeros((len(q), 1)), np.ones((len(q), 1))]
         for axis in (0, 1):
-            lo = np.floor(np.minimum(p[axis], q[:, axis]))
-            hi = np.floor(np.maximum(p[axis], q[:, axis]))
+            lo = np.floor(np.minimum(p[..., axis], q[:, axis]))
+            hi = np.floor(np.maximum(p[..., axis], q[:, axis]))
             n = int(np.max(hi - lo, initial=0))
             if n == 0:
                 continue
             lines = lo[:, None] + np.arange(1, n + 1)  # (M, n) grid lines between the end cells
             with np.errstate(divide="ignore", invalid="ignore"):
-                t = np.clip((lines - p[axis]) / d[:, axis:axis + 1], 0.0, 1.0)
+                t = np.clip((lines - p_col[..., axis]) / d[:, axis:axis + 1], 0.0, 1.0)
             ts.append(np.where(lines <= hi[:, None], t, np.nan))
         t = np.sort(np.concatenate(ts, axis=1), axis=1)  # (M, K), NaN last
         # 2. one probe point per crossed cell (interval midpoint); a zero-length interval is a
@@ -320,16 +328,21 @@ class AStarPlanner:
         real = np.isfinite(t_hi)
         corner = real & (t_hi - t_lo < 1e-9)
         mid = np.where(real, 0.5 * (t_lo + t_hi), 0.0)
-        pts = p + mid[..., None] * d[:, None, :]  # (M, K-1, 2) [cells]
-        spread = np.array([[-0.5, -0.5], [-0.5, 0.5], [0.5, -0.5], [0.5, 0.5]])  # (4, 2)
-        probes = pts[..., None, :] + corner[..., None, None] * spread  # (M, K-1, 4, 2)
+        pts = p_col + mid[..., None] * d[:, None, :]  # (M, K-1, 2) [cells]
         # 3. every probe must lie in a traversable cell on the map
-        col = np.floor(probes[..., 0]).astype(np.int64)
-        row = np.floor(probes[..., 1]).astype(np.int64)
+        ok = self._in_mask(pts) | ~real  # (M, K-1)
+        if corner.any():
+            spread = np.array([[-0.5, -0.5], [-0.5, 0.5], [0.5, -0.5], [0.5, 0.5]])  # (4, 2)
+            ok[corner] &= np.all(self._in_mask(pts[corner][:, None, :] + spread), axis=1)
+        return np.all(ok, axis=1)
+
+    def _in_mask(self, pts: np.ndarray) -> np.ndarray:
+        """Whether points (..., 2) [cells, x then y] lie in traversable cells on the map -> (...)."""
+        col = np.floor(pts[..., 0]).astype(np.int64)
+        row = np.floor(pts[..., 1]).astype(np.int64)
         inside = (row >= 0) & (row < self.grid.height) & (col >= 0) & (col < self.grid.width)
-        ok = inside & self.mask[np.clip(row, 0, self.grid.height - 1),
-                                np.clip(col, 0, self.grid.width - 1)]
-        return np.all(ok | ~real[..., None], axis=(1, 2))
+        return inside & self.mask[np.clip(row, 0, self.grid.height - 1),
+                                  np.clip(col, 0, self.grid.width - 1)]
 
     # ---------------------------------------------------------------------- exact clearance
     def _centre_clearance(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
@@ -383,6 +396,304 @@ class AStarPlanner:
         """Whether every segment of a (N, 2) path [m] crosses traversable cells only."""
         path = np.asarray(path, dtype=np.float64)
         return all(bool(self.visible(path[i], path[i + 1:i + 2])[0]) for i in range(len(path) - 1))
+
+
+class CoarseAStarPlanner:
+    """A* for large maps: a search on blocks of fine cells, then the path made exact on the fine
+    grid. Same contract and guarantees as :meth:`AStarPlanner.plan` (whose traversable mask,
+    checks and string pulling it reuses); the paths are near-shortest instead of shortest.
+
+    1. Coarse graph (built once): the fine traversable mask is cut into square blocks of
+       ``block`` x ``block`` cells, and each 4-connected piece of traversable cells inside a
+       block is one node, represented by its cell nearest to the piece's centroid. Two nodes are
+       joined if a fine cell of one is 4-adjacent to a fine cell of the other (or, across a block
+       corner, diagonal with both side cells traversable); the edge cost is the distance between
+       the representatives. A node's cells are connected inside the node, so two fine cells are
+       connected iff their nodes are: a narrow door (a band of traversable cells narrower than a
+       block) is never lost, as it would be by a mask of "wholly traversable" blocks.
+    2. Coarse A* (Euclidean heuristic, consistent) gives a chain of nodes from the start's to the
+       goal's.
+    3. Fine path: start, the representatives of the chain's inner nodes, goal. Each consecutive
+       pair is joined directly if the segment crosses traversable cells only and keeps the exact
+       clearance (:meth:`AStarPlanner.segment_clearance`), else by fine A* restricted to the cells
+       of the two nodes (connected by construction). Representative-to-representative joins are
+       cached.
+    4. String pulling (:meth:`AStarPlanner.shortcut`).
+
+    Every vertex is thus the start, the goal or a traversable cell centre, and every segment is a
+    fine 8-connected step or a segment with the exact clearance: what :class:`AStarPlanner`
+    guarantees. What is lost is optimality: the chain is shortest for the representatives, not
+    for the fine grid (docs: a few per cent longer, measured in ``ecahd_core.dataset``).
+
+    Attributes:
+        fine: the :class:`AStarPlanner` whose mask, clearance and checks are used.
+        block: block side [cells].
+        labels: (H, W) int32 node of each traversable fine cell, -1 elsewhere.
+        num_nodes: number of coarse nodes.
+    """
+
+    def __init__(self, fine: AStarPlanner, block: int) -> None:
+        import cv2
+
+        if isinstance(block, bool) or not isinstance(block, (int, np.integer)) or block < 1:
+            raise PlanningError(f"coarse A* block must be an integer >= 1 cell, got {block!r}")
+        self.fine = fine
+        self.grid = fine.grid
+        self.clearance = fine.clearance
+        self.block = B = int(block)
+        mask = fine.mask
+        H, W = mask.shape
+        nbr, nbc = -(-H // B), -(-W // B)
+        # 1. the pieces of every block at once: blocks laid out with one blocked row and column
+        #    between them, so that one labelling never joins cells of different blocks
+        padded = np.zeros((nbr * B, nbc * B), dtype=bool)
+        padded[:H, :W] = mask
+        spaced = np.zeros((nbr, B + 1, nbc, B + 1), dtype=np.uint8)
+        spaced[:, :B, :, :B] = padded.reshape(nbr, B, nbc, B)
+        n, lab = cv2.connectedComponents(spaced.reshape(nbr * (B + 1), nbc * (B + 1)),
+                                         connectivity=4)
+        labels = lab.reshape(nbr, B + 1, nbc, B + 1)[:, :B, :, :B].reshape(nbr * B, nbc * B)
+        labels = np.ascontiguousarray(labels[:H, :W], dtype=np.int32) - 1  # (H, W), -1: none
+        labels.setflags(write=False)
+        self.labels = labels
+        N = self.num_nodes = n - 1
+        # 2. representatives: each node's cell nearest to its centroid (row-major on ties)
+        rows, cols = np.nonzero(labels >= 0)
+        ids = labels[rows, cols]
+        count = np.bincount(ids, minlength=N)
+        c_row = np.bincount(ids, rows, minlength=N) / count
+        c_col = np.bincount(ids, cols, minlength=N) / count
+        d2 = (rows - c_row[ids]) ** 2 + (cols - c_col[ids]) ** 2
+        order = np.lexsort((d2, ids))
+        first = order[np.searchsorted(ids[order], np.arange(N))]
+        self.rep_cells = np.stack([rows[first], cols[first]], axis=1)  # (N, 2) row, col
+        self.rep_xy = self.grid.cell_to_world(rows[first], cols[first])  # (N, 2) [m]
+        # 3. edges across block borders
+        pairs = []
+        cs = np.arange(B - 1, W - 1, B)  # last column of a block with a block to its right
+        rs = np.arange(B - 1, H - 1, B)
+        for a, b in ((labels[:, cs], labels[:, cs + 1]), (labels[rs, :], labels[rs + 1, :])):
+            ok = (a >= 0) & (b >= 0)
+            pairs.append(np.stack([a[ok], b[ok]], axis=1))
+        r, c = np.meshgrid(rs, cs, indexing="ij")
+        corner = mask[r, c] & mask[r + 1, c + 1] & mask[r, c + 1] & mask[r + 1, c]
+        r, c = r[corner], c[corner]
+        pairs.append(np.stack([labels[r, c], labels[r + 1, c + 1]], axis=1))
+        pairs.append(np.stack([labels[r, c + 1], labels[r + 1, c]], axis=1))
+        e = np.concatenate(pairs).astype(np.int64)
+        e = np.concatenate([e, e[:, ::-1]])
+        e = np.unique(e[:, 0] * N + e[:, 1])
+        src, dst = e // N, e % N  # sorted by source
+        cost = np.hypot(*(self.rep_cells[src] - self.rep_cells[dst]).T)  # [cells]
+        self._indptr: list[int] = np.searchsorted(src, np.arange(N + 1)).tolist()
+        self._dst: list[int] = dst.tolist()
+        self._cost: list[float] = cost.tolist()
+        # node of each cell of the fine planner's padded flat layout (-1 off the mask)
+        self._label_flat: list[int] = np.pad(labels, 1, constant_values=-1).reshape(-1).tolist()
+        self._joins: dict[tuple[int, int], list] = {}  # (node, node) -> inner points [m]
+        self._landmark_dist = self._landmarks(COARSE_LANDMARKS)  # (K, N) [cells]
+
+    def _dijkstra(self, source: int) -> np.ndarray:
+        """(N,) cost [cells] from ``source`` to every node over the coarse graph, inf if none."""
+        indptr, dst, cost = self._indptr, self._dst, self._cost
+        dist = [math.inf] * self.num_nodes
+        dist[source] = 0.0
+        heap = [(0.0, source)]
+        while heap:
+            d, node = heapq.heappop(heap)
+            if d > dist[node]:
+                continue
+            for j in range(indptr[node], indptr[node + 1]):
+                nb = dst[j]
+                d_nb = d + cost[j]
+                if d_nb < dist[nb]:
+                    dist[nb] = d_nb
+                    heapq.heappush(heap, (d_nb, nb))
+        return np.asarray(dist)
+
+    def _landmarks(self, k: int) -> np.ndarray:
+        """Costs from ``k`` landmarks (farthest-point picks in the largest connected region of
+        the coarse graph, from its lowest node on) to every node: (K, N) [cells]. Used by the ALT
+        heuristic max_L |d(L, goal) - d(L, n)| (Goldberg & Harrekson 2005), which is consistent."""
+        if self.num_nodes == 0:
+            return np.zeros((0, 0))
+        comp = self.fine.components[tuple(self.rep_cells.T)]  # (N,) region of each node
+        largest = np.bincount(comp).argmax()
+        far = np.full(self.num_nodes, -1.0)
+        far[comp == largest] = math.inf
+        dists = []
+        node = int(np.flatnonzero(comp == largest)[0])
+        for _ in range(k):
+            d = self._dijkstra(node)
+            dists.append(d)
+            far = np.minimum(far, np.where(np.isfinite(d), d, -1.0))
+            node = int(np.argmax(far))
+            if far[node] <= 0:
+                break
+        return np.stack(dists)
+
+    @classmethod
+    def for_resolution(cls, fine: AStarPlanner, block_size: float) -> "CoarseAStarPlanner":
+        """Blocks of about ``block_size`` [m] (at least one cell)."""
+        return cls(fine, max(1, int(round(block_size / fine.grid.resolution))))
+
+    @property
+    def mask(self) -> np.ndarray:
+        return self.fine.mask
+
+    @property
+    def components(self) -> np.ndarray:
+        return self.fine.components
+
+    def plan(self, start_xy, goal_xy) -> np.ndarray:
+        """Plan from ``start_xy`` to ``goal_xy`` [m]: (N, 2) world path [m], N >= 2, exactly the
+        start first and the goal last (see the class docstring). Raises PlanningError as
+        :meth:`AStarPlanner.plan`."""
+        fine = self.fine
+        start, start_cell = fine.check_endpoint(start_xy, "start")
+        goal, goal_cell = fine.check_endpoint(goal_xy, "goal")
+        if not fine.connected(start_cell, goal_cell):
+            raise PlanningError(
+                f"no path from start ({start[0]:.3f}, {start[1]:.3f}) to goal "
+                f"({goal[0]:.3f}, {goal[1]:.3f}) on map {self.grid.name!r} with clearance "
+                f"{self.clearance:.3f} m: they lie in separate regions of the clearance-free space")
+        chain = self.search(int(self.labels[start_cell]), int(self.labels[goal_cell]))
+        pts = [start, *self.rep_xy[chain[1:-1]], goal]
+        nodes = chain if len(chain) > 1 else chain * 2  # nodes[k]: the node of pts[k]
+        last = len(pts) - 2
+        # 1. which consecutive points see each other with the clearance (cached for reps)
+        direct = [None] * (last + 1)
+        todo = []
+        for k in range(last + 1):
+            if 0 < k < last and (nodes[k], nodes[k + 1]) in self._joins:
+                direct[k] = False  # use the cached join
+            else:
+                todo.append(k)
+        if todo:
+            a = np.array([pts[k] for k in todo])
+            b = np.array([pts[k + 1] for k in todo])
+            seen = self.fine.visible_segments(a, b)
+            for k, ok in zip(todo, seen):
+                direct[k] = bool(ok) and (fine.segment_clearance(pts[k], pts[k + 1])
+                                          >= self.clearance - SDF_TOLERANCE)
+        # 2. the fine path: direct segments, cached or new restricted searches
+        out = [start]
+        for k in range(last + 1):
+            key = (nodes[k], nodes[k + 1])
+            if direct[k]:
+                inner = []
+            elif 0 < k < last and key in self._joins:
+                inner = self._joins[key]
+            else:
+                a_cell = tuple(int(v) for v in self.grid.world_to_cell(pts[k]))
+                b_cell = tuple(int(v) for v in self.grid.world_to_cell(pts[k + 1]))
+                cells = self.search_within(a_cell, b_cell, set(key))
+                rows, cols = np.asarray(cells, dtype=np.int64).T
+                inner = list(self.grid.cell_to_world(rows, cols))
+            if 0 < k < last:
+                self._joins[key] = inner
+            out.extend(inner)
+            out.append(pts[k + 1])
+        path = np.asarray(out, dtype=np.float64)
+        keep = np.concatenate([[True], np.any(np.diff(path, axis=0) != 0, axis=1)])
+        path = path[keep]
+        if len(path) == 1:  # start == goal
+            path = np.stack([start, goal])
+        if fine.smooth:
+            path = fine.shortcut(path)
+        return path
+
+    def search(self, start: int, goal: int) -> list[int]:
+        """A* over coarse nodes; returns the nodes from ``start`` to ``goal`` inclusive."""
+        indptr, dst, cost = self._indptr, self._dst, self._cost
+        # heuristic of every node [cells]: Euclidean between representatives, or ALT if larger
+        heuristic = np.hypot(*(self.rep_cells - self.rep_cells[goal]).T)
+        L = self._landmark_dist
+        if len(L) and np.isfinite(L[0, goal]):
+            with np.errstate(invalid="ignore"):
+                alt = np.abs(L[:, goal:goal + 1] - L).max(axis=0)
+            heuristic = np.fmax(heuristic, alt)  # NaN (other regions) -> Euclidean
+        h_of: list[float] = (COARSE_WEIGHT * heuristic).tolist()
+        g = {start: 0.0}
+        parent = {start: start}
+        closed = set()
+        heap = [(h_of[start], h_of[start], start)]
+        while heap:
+            _, _, node = heapq.heappop(heap)
+            if node in closed:
+                continue
+            if node == goal:
+                break
+            closed.add(node)
+            g_node = g[node]
+            for j in range(indptr[node], indptr[node + 1]):
+                nb = dst[j]
+                if nb in closed:
+                    continue
+                g_nb = g_node + cost[j]
+                if g_nb < g.get(nb, math.inf):
+                    g[nb] = g_nb
+                    parent[nb] = node
+                    h = h_of[nb]
+                    heapq.heappush(heap, (g_nb + h, h, nb))
+        else:
+            raise PlanningError(f"coarse A* found no path between nodes {start} and {goal} on map "
+                                f"{self.grid.name!r} with clearance {self.clearance:.3f} m")
+        chain = [goal]
+        while chain[-1] != start:
+            chain.append(parent[chain[-1]])
+        return chain[::-1]
+
+    def search_within(self, start_cell: tuple[int, int], goal_cell: tuple[int, int],
+                      nodes: set[int]) -> list[tuple[int, int]]:
+        """Fine A* (the moves and corner rule of :meth:`AStarPlanner.search`) through the cells of
+        ``nodes`` only; returns the cells (row, col) from start to goal inclusive."""
+        fine = self.fine
+        stride = fine._stride
+        traversable = fine._traversable
+        label = self._label_flat
+        start = (start_cell[0] + 1) * stride + start_cell[1] + 1
+        goal = (goal_cell[0] + 1) * stride + goal_cell[1] + 1
+        goal_row, goal_col = divmod(goal, stride)
+        g = {start: 0.0}
+        parent = {start: start}
+        closed = set()
+        heap = [(0.0, 0.0, start)]
+        while heap:
+            _, _, node = heapq.heappop(heap)
+            if node in closed:
+                continue
+            if node == goal:
+                break
+            closed.add(node)
+            g_node = g[node]
+            for offset, cost, sides in fine._moves:
+                nb = node + offset
+                if label[nb] not in nodes or nb in closed:
+                    continue
+                if sides is not None and not (traversable[node + sides[0]]
+                                              and traversable[node + sides[1]]):
+                    continue
+                g_nb = g_node + cost
+                if g_nb < g.get(nb, math.inf):
+                    g[nb] = g_nb
+                    parent[nb] = node
+                    row, col = divmod(nb, stride)
+                    dr, dc = abs(row - goal_row), abs(col - goal_col)
+                    h = (dr + dc) + (SQRT2 - 2.0) * min(dr, dc)
+                    heapq.heappush(heap, (g_nb + h, h, nb))
+        else:
+            raise PlanningError(f"A* found no path between cells {start_cell} and {goal_cell} "
+                                f"within coarse nodes {sorted(nodes)} on map {self.grid.name!r}")
+        cells = []
+        node = goal
+        while True:
+            row, col = divmod(node, stride)
+            cells.append((row - 1, col - 1))
+            if node == start:
+                break
+            node = parent[node]
+        return cells[::-1]
 
 
 # ------------------------------------------------------------------------------- helpers
