@@ -125,7 +125,8 @@ PARAMETERS = [
     ParamSpec("scan_frame_id", "base_scan", "header.frame_id of the scans"),
     ParamSpec("seed", 0, "seed of the simulator's random generator (scan noise)"),
     ParamSpec("obstacles_file", "", "scenario YAML of obstacles that are not on the map "
-                                    "('' = none)"),
+                                    "('' = none); dynamic: setting it replaces the obstacles "
+                                    "(moving ones set off again)"),
 ]
 
 
@@ -241,7 +242,7 @@ class SimBridge(Node):
             raise
 
     def _configure(self) -> None:
-        declare_parameters(self, PARAMETERS)
+        declare_parameters(self, PARAMETERS, dynamic=("obstacles_file",))
         self.rejected_commands = 0  # cmd_vel messages ignored as malformed
         self._cmd = (0.0, 0.0)  # (v [m/s], w [rad/s])
         self._cmd_time: float | None = None  # [s of sim time] when _cmd arrived
@@ -266,8 +267,8 @@ class SimBridge(Node):
                             if p.publish_camera else None)
         self._scan_pub = (self.create_publisher(LaserScan, "scan", STREAM_QOS)
                           if p.publish_scan else None)
-        self._obstacles_pub = (self.create_publisher(MarkerArray, "sim_obstacles", VIZ_QOS)
-                               if self.sim.obstacles else None)
+        self._obstacles_pub = self.create_publisher(MarkerArray, "sim_obstacles", VIZ_QOS)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
         cmd_type = TwistStamped if p.enable_stamped_cmd_vel else Twist
         self.create_subscription(cmd_type, "cmd_vel", self._on_cmd_vel, STREAM_QOS)
         self.create_subscription(PoseWithCovarianceStamped, "initialpose", self._on_initialpose,
@@ -284,6 +285,31 @@ class SimBridge(Node):
             f"{' (as fast as possible)' if p.realtime_factor <= 0 else ''}")
 
     # --------------------------------------------------------------------------- callbacks
+    def _on_set_parameters(self, changes):
+        """``obstacles_file`` may change at run time: the new scenario replaces the obstacles
+        (an unreadable file is rejected with its reason; bad entries are left out, logged)."""
+        from rcl_interfaces.msg import SetParametersResult
+
+        for change in changes:
+            if change.name != "obstacles_file":
+                continue
+            path = str(change.value).strip()
+            try:
+                obstacles, errors = read_scenario(path) if path else ([], [])
+            except EcahdError as exc:
+                return SetParametersResult(successful=False, reason=str(exc))
+            for line in errors:
+                self.get_logger().error(f"{path}: {line}; left out")
+            for line in self.sim.set_obstacles(obstacles):
+                self.get_logger().error(f"{path}: {line}")
+            if not self.sim.obstacles:  # RViz: clear the old markers
+                clear = Marker()
+                clear.action = Marker.DELETEALL
+                self._obstacles_pub.publish(MarkerArray(markers=[clear]))
+            self.get_logger().info(f"obstacles from {path or 'nothing'}: "
+                                   f"{len(self.sim.obstacles)} in the world")
+        return SetParametersResult(successful=True)
+
     def _on_cmd_vel(self, msg: Twist | TwistStamped) -> None:
         twist = msg.twist if isinstance(msg, TwistStamped) else msg
         v, w = twist.linear.x, twist.angular.z
@@ -335,7 +361,7 @@ class SimBridge(Node):
             self._next_scan_t = state.t + 1.0 / self.params.scan_rate_hz
             if self._scan_pub is not None:
                 self._scan_pub.publish(self._scan(state))
-            if self._obstacles_pub is not None:
+            if self.sim.obstacles:
                 self._obstacles_pub.publish(obstacle_markers(self.sim, now))
         if self._camera_pub is not None and state.t >= self._next_camera_t - 1e-9:
             self._next_camera_t = state.t + 1.0 / self.params.camera_rate_hz

@@ -300,7 +300,9 @@ class MazeSim:
         self.rejected_obstacles: list[str] = []
         self._obstacles: list[tuple[int, Obstacle, int]] = []  # (scenario index, obstacle, body)
         self._obstacle_xy = np.zeros((0, 2))  # (M, 2) current centres [m]
-        self._build_obstacles(pybullet)
+        self._obstacle_reach = np.zeros(0)
+        self._obstacle_t0 = 0.0  # [s] sim time at which the moving obstacles set off
+        self._build_obstacles(pybullet, config.obstacles)
         self.reset(*config.start)
 
     # ------------------------------------------------------------------------ construction
@@ -365,10 +367,24 @@ class MazeSim:
         self._client.setCollisionFilterGroupMask(body, -1, ROBOT_FILTER_GROUP, -1)
         return body
 
-    def _build_obstacles(self, pybullet) -> None:
-        """A static body per obstacle; those off the map or on the start pose are rejected."""
-        t = self._total_steps * self.config.dt
-        for i, ob in enumerate(self.config.obstacles):
+    def set_obstacles(self, obstacles) -> list[str]:
+        """Replace the obstacles (a new scenario, e.g. per benchmark episode): the old bodies
+        go, the new ones appear; moving ones set off from their path's start now. Returns the
+        lines of the obstacles left out (off the map, overlapping the robot)."""
+        import pybullet
+
+        for _, _, body in self._obstacles:
+            self._client.removeBody(body)
+        self._obstacles = []
+        self.rejected_obstacles = []
+        self._obstacle_t0 = self._total_steps * self.config.dt
+        self._build_obstacles(pybullet, tuple(obstacles))
+        return list(self.rejected_obstacles)
+
+    def _build_obstacles(self, pybullet, obstacles) -> None:
+        """A static body per obstacle; those off the map or on the robot's pose are rejected."""
+        t = self._total_steps * self.config.dt - self._obstacle_t0
+        for i, ob in enumerate(obstacles):
             points = np.asarray(ob.path if ob.moving else [(ob.x, ob.y)], dtype=np.float64)
             if not np.all(self.grid.in_bounds(points)):
                 self._reject(i, ob, "it is (or its path goes) outside the map")
@@ -407,7 +423,7 @@ class MazeSim:
         """Kinematic obstacles to their pose at time t [s]."""
         for k, (_, ob, body) in enumerate(self._obstacles):
             if ob.moving:
-                x, y = ob.position(t)
+                x, y = ob.position(t - self._obstacle_t0)
                 self._obstacle_xy[k] = (x, y)
                 self._client.resetBasePositionAndOrientation(body, [x, y, WALL_HEIGHT / 2],
                                                              _quaternion(ob.yaw))
