@@ -17,6 +17,14 @@ length into
 Because the sparse waypoints are evenly spaced by arc length, ``sparse_h{h}`` equals
 ``sparse[:, P^g - h:]``; it is stored so that training code reads each horizon by name.
 
+Two experts (``expert``): "exact" plans every pair with :class:`~ecahd_core.astar.AStarPlanner`
+on the fine grid, drawing the pairs one after the other from one random generator (the shipped
+maze2d-large data); "coarse" plans with :class:`~ecahd_core.astar.CoarseAStarPlanner` (same
+guarantees, paths a few tenths of a per cent longer) and draws attempt i from its own generator
+seeded (seed, i), both points in the largest region of the clearance-free space, so that the
+attempts can run in worker processes and the data do not depend on how many. "auto" (the
+default) is exact for maps of at most ``EXACT_MAX_CELLS`` cells and coarse above.
+
 Files are versioned ``.npz`` archives (``DATASET_VERSION``) that also hold the map and every
 generation parameter; they are written byte-for-byte reproducibly, so the same map, seed and
 parameters give the same :func:`file_sha256` (recorded in checkpoints).
@@ -38,8 +46,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ecahd_core.astar import (SDF_TOLERANCE, AStarPlanner, clearance_for_footprint, path_length,
-                              sample_free_point)
+from ecahd_core.astar import (SDF_TOLERANCE, AStarPlanner, CoarseAStarPlanner,
+                              clearance_for_footprint, path_length, sample_free_point)
 from ecahd_core.errors import DatasetError, PlanningError, TrajectoryError
 from ecahd_core.footprint import make_footprint
 from ecahd_core.maps import GridMap
@@ -51,6 +59,10 @@ DATASET_KIND = "ecahd-expert-dataset"
 DTYPE = np.float32  # trajectories, starts, goals, lengths
 _ENDPOINT_TRIES = 100  # jittered draws per start / goal before falling back to a cell centre
 _ZIP_DATE = (1980, 1, 1, 0, 0, 0)  # fixed member timestamps: reproducible files
+EXPERTS = ("auto", "exact", "coarse")
+EXACT_MAX_CELLS = 50_000  # expert "auto": exact A* up to this many map cells, coarse above
+COARSE_BLOCK_SIZE = 0.3  # [m] block side of the coarse expert's search graph
+_CHUNKSIZE = 8  # attempts per task sent to a worker process
 
 
 # ------------------------------------------------------------------------------ resampling
@@ -353,7 +365,9 @@ def file_sha256(path: str | os.PathLike) -> str:
 def generate_dataset(grid: GridMap, *, pairs: int, seed: int, footprint_spec: str = "circle",
                      padding: float = 0.0, min_distance: float = 3.0, sparse_horizon: int = 10,
                      dense_points: int = 4, full_points: int = 100, progress: bool = True,
-                     max_attempts: int | None = None) -> ExpertDataset:
+                     max_attempts: int | None = None, expert: str = "auto",
+                     workers: int | None = None,
+                     coarse_block_size: float = COARSE_BLOCK_SIZE) -> ExpertDataset:
     """Plan ``pairs`` expert paths between seeded random start/goal pairs (paper Sec. IV-A).
 
     Starts and goals are drawn uniformly from the clearance-free space (clearance = the
@@ -362,60 +376,59 @@ def generate_dataset(grid: GridMap, *, pairs: int, seed: int, footprint_spec: st
     path or the smoothed path is shorter than ``min_distance`` [m]. The result always holds
     exactly ``pairs`` paths; ``params`` records the attempts and the rejections.
 
+    ``expert`` chooses the planner and the draws (module docstring): "exact", "coarse" (blocks of
+    about ``coarse_block_size`` [m]; ``workers`` processes, default one per CPU, results
+    independent of their number) or "auto" (exact for at most ``EXACT_MAX_CELLS`` map cells).
+    The exact expert always runs in this process.
+
     Raises:
         DatasetError: bad parameters, no clearance-free space, or fewer than ``pairs`` kept
             paths after ``max_attempts`` (default 20 * pairs + 100) draws.
     """
-    from tqdm import tqdm
-
     _check_positive_int("pairs", pairs, 1)
     _check_positive_int("sparse_horizon", sparse_horizon, 2)
     _check_positive_int("dense_points", dense_points, 2)
     _check_positive_int("full_points", full_points, 2)
     if not (math.isfinite(min_distance) and min_distance >= 0):
         raise DatasetError(f"min_distance must be a finite number >= 0 m, got {min_distance!r}")
+    if expert not in EXPERTS:
+        raise DatasetError(f"expert must be one of {list(EXPERTS)}, got {expert!r}")
+    if workers is not None:
+        _check_positive_int("workers", workers, 1)
+    if not (isinstance(coarse_block_size, (int, float)) and math.isfinite(coarse_block_size)
+            and coarse_block_size > 0):
+        raise DatasetError(f"coarse_block_size must be a finite number > 0 m, "
+                           f"got {coarse_block_size!r}")
     if max_attempts is None:
         max_attempts = 20 * pairs + 100
+    if expert == "auto":
+        expert = "exact" if grid.height * grid.width <= EXACT_MAX_CELLS else "coarse"
 
     footprint = make_footprint(footprint_spec)
     clearance = clearance_for_footprint(footprint, padding=padding)
+    t0 = time.perf_counter()
     planner = AStarPlanner(grid, clearance, smooth=True)
     if not planner.mask.any():
         raise DatasetError(f"no cell of map {grid.name!r} is {clearance:.3f} m away from the "
                            f"obstacles, the clearance robot {footprint.name!r} needs")
-    rng = np.random.default_rng(seed)
-
-    samples: list[ExpertSample] = []
-    starts, goals = [], []
-    attempts = rejected_short = rejected_unreachable = 0
-    t0 = time.perf_counter()
-    with tqdm(total=pairs, disable=not progress, desc=f"A* expert paths on {grid.name}",
-              unit="pair") as bar:
-        while len(samples) < pairs:
-            if attempts >= max_attempts:
-                raise DatasetError(
-                    f"kept only {len(samples)} of {pairs} pairs after {attempts} attempts on map "
-                    f"{grid.name!r} ({rejected_short} paths shorter than {min_distance} m, "
-                    f"{rejected_unreachable} unreachable goals); lower min_distance")
-            attempts += 1
-            start = sample_endpoint(rng, planner)
-            goal = sample_endpoint(rng, planner)
-            try:
-                path = planner.plan(start, goal)
-            except PlanningError:
-                rejected_unreachable += 1
-                continue
-            if path_length(path) < min_distance:
-                rejected_short += 1
-                continue
-            samples.append(expert_sample(path, sparse_horizon=sparse_horizon,
-                                         dense_points=dense_points, full_points=full_points))
-            starts.append(start)
-            goals.append(goal)
-            bar.update(1)
+    views = dict(sparse_horizon=sparse_horizon, dense_points=dense_points, full_points=full_points)
+    run = _ExpertRun(pairs=pairs, max_attempts=max_attempts, min_distance=min_distance,
+                     grid=grid, progress=progress)
+    extra = {}
+    if expert == "exact":
+        run.exact(planner, np.random.default_rng(seed), views)
+    else:
+        coarse = CoarseAStarPlanner.for_resolution(planner, coarse_block_size)
+        workers = workers or os.cpu_count() or 1
+        log.info("coarse expert on %s: %d x %d cells, blocks of %d cells, %d graph nodes, "
+                 "built in %.1f s; %d worker(s)", grid.name, grid.height, grid.width,
+                 coarse.block, coarse.num_nodes, time.perf_counter() - t0, workers)
+        run.coarse(coarse, seed, views, workers)
+        extra = {"expert_block": coarse.block,
+                 "sampling": "attempt i seeded (seed, i), largest clearance-free region"}
     elapsed = time.perf_counter() - t0
     log.info("kept %d expert paths in %d attempts (%d too short, %d unreachable) in %.1f s",
-             pairs, attempts, rejected_short, rejected_unreachable, elapsed)
+             pairs, run.attempts, run.rejected_short, run.rejected_unreachable, elapsed)
 
     from ecahd_core import __version__
 
@@ -432,14 +445,16 @@ def generate_dataset(grid: GridMap, *, pairs: int, seed: int, footprint_spec: st
         "sparse_horizon": int(sparse_horizon),
         "dense_points": int(dense_points),
         "full_points": int(full_points),
-        "attempts": attempts,
-        "rejected_short": rejected_short,
-        "rejected_unreachable": rejected_unreachable,
-        "expert": "astar+shortcut",
+        "attempts": run.attempts,
+        "rejected_short": run.rejected_short,
+        "rejected_unreachable": run.rejected_unreachable,
+        "expert": "astar+shortcut" if expert == "exact" else "coarse-astar+shortcut",
+        **extra,
         "ecahd_version": __version__,
         "map": {"frame_id": grid.frame_id, "unknown_is_occupied": grid.unknown_is_occupied,
                 "occupied_threshold": grid.occupied_threshold},
     }
+    samples, starts, goals = run.samples, run.starts, run.goals
     return ExpertDataset(
         sparse=np.stack([s.sparse for s in samples]).astype(DTYPE),
         sparse_h={h: np.stack([s.sparse_h[h] for s in samples]).astype(DTYPE)
@@ -456,6 +471,132 @@ def generate_dataset(grid: GridMap, *, pairs: int, seed: int, footprint_spec: st
         map_fingerprint=grid.fingerprint(),
         params=params,
     )
+
+
+class _ExpertRun:
+    """The attempts of one :func:`generate_dataset` call: kept samples in attempt order, counts
+    of the rejections, the progress bar."""
+
+    def __init__(self, *, pairs: int, max_attempts: int, min_distance: float, grid: GridMap,
+                 progress: bool) -> None:
+        self.pairs, self.max_attempts, self.min_distance = pairs, max_attempts, min_distance
+        self.grid, self.progress = grid, progress
+        self.samples: list[ExpertSample] = []
+        self.starts: list[np.ndarray] = []
+        self.goals: list[np.ndarray] = []
+        self.attempts = self.rejected_short = self.rejected_unreachable = 0
+
+    def _bar(self, what: str):
+        from tqdm import tqdm
+
+        return tqdm(total=self.pairs, disable=not self.progress, unit="pair",
+                    desc=f"{what} expert paths on {self.grid.name}")
+
+    def _check_attempts(self) -> None:
+        if self.attempts >= self.max_attempts:
+            raise DatasetError(
+                f"kept only {len(self.samples)} of {self.pairs} pairs after {self.attempts} "
+                f"attempts on map {self.grid.name!r} ({self.rejected_short} paths shorter than "
+                f"{self.min_distance} m, {self.rejected_unreachable} unreachable goals); "
+                "lower min_distance")
+
+    def _record(self, outcome, bar) -> None:
+        """Count one attempt's outcome: ("ok", start, goal, sample), ("short",) or
+        ("unreachable",)."""
+        self.attempts += 1
+        if outcome[0] == "unreachable":
+            self.rejected_unreachable += 1
+        elif outcome[0] == "short":
+            self.rejected_short += 1
+        else:
+            _, start, goal, sample = outcome
+            self.samples.append(sample)
+            self.starts.append(start)
+            self.goals.append(goal)
+            bar.update(1)
+
+    def exact(self, planner: AStarPlanner, rng: np.random.Generator, views: dict) -> None:
+        """Fine-grid A*, pairs drawn one after the other from ``rng`` (the shipped data)."""
+        with self._bar("A*") as bar:
+            while len(self.samples) < self.pairs:
+                self._check_attempts()
+                start = sample_endpoint(rng, planner)
+                goal = sample_endpoint(rng, planner)
+                self._record(_plan_attempt(planner, start, goal, self.min_distance, views), bar)
+
+    def coarse(self, coarse: CoarseAStarPlanner, seed: int, views: dict, workers: int) -> None:
+        """Coarse A*, attempt i drawn from its own seed, in ``workers`` processes (results taken
+        in attempt order)."""
+        fine = coarse.fine
+        comp = fine.components
+        region = comp == np.bincount(comp[comp > 0]).argmax()  # largest clearance-free region
+        rows, cols = np.nonzero(region)
+        task = (coarse, (rows, cols), int(seed), self.min_distance, views)
+        with self._bar(f"coarse A* ({workers} worker{'s' if workers > 1 else ''})") as bar:
+            if workers == 1:
+                outcomes = (_coarse_attempt(task, i) for i in range(self.max_attempts))
+                self._consume(outcomes, bar)
+                return
+            import multiprocessing
+
+            global _TASK
+            _TASK = task  # inherited by the forked workers, not pickled
+            ctx = multiprocessing.get_context("fork")
+            try:
+                with ctx.Pool(workers) as pool:
+                    self._consume(pool.imap(_coarse_attempt_forked, range(self.max_attempts),
+                                            chunksize=_CHUNKSIZE), bar)
+                    pool.terminate()  # attempts computed beyond the last kept pair are dropped
+            finally:
+                _TASK = None
+
+    def _consume(self, outcomes, bar) -> None:
+        for outcome in outcomes:
+            self._record(outcome, bar)
+            if len(self.samples) >= self.pairs:
+                return
+        self._check_attempts()  # the attempts ran out
+
+
+_TASK = None  # the coarse run's (planner, region cells, seed, min_distance, views) for workers
+
+
+def _coarse_attempt_forked(index: int):
+    return _coarse_attempt(_TASK, index)
+
+
+def _coarse_attempt(task, index: int):
+    """Attempt ``index`` of a coarse run: start and goal from the generator seeded (seed, index)."""
+    coarse, cells, seed, min_distance, views = task
+    rng = np.random.default_rng([seed, index])
+    start = _sample_in_cells(rng, coarse.fine, cells)
+    goal = _sample_in_cells(rng, coarse.fine, cells)
+    return _plan_attempt(coarse, start, goal, min_distance, views)
+
+
+def _plan_attempt(planner, start: np.ndarray, goal: np.ndarray, min_distance: float,
+                  views: dict):
+    """Plan one pair: ("ok", start, goal, ExpertSample), ("short",) or ("unreachable",)."""
+    try:
+        path = planner.plan(start, goal)
+    except PlanningError:
+        return ("unreachable",)
+    if path_length(path) < min_distance:
+        return ("short",)
+    return ("ok", start, goal, expert_sample(path, **views))
+
+
+def _sample_in_cells(rng: np.random.Generator, planner: AStarPlanner, cells) -> np.ndarray:
+    """:func:`sample_endpoint` over the given traversable cells (rows, cols) (K,) only."""
+    rows, cols = cells
+    res = planner.grid.resolution
+    for _ in range(_ENDPOINT_TRIES):
+        k = rng.integers(0, len(rows))
+        centre = planner.grid.cell_to_world(rows[k], cols[k])
+        point = centre + 0.98 * (rng.random(2) - 0.5) * res
+        if planner.point_clearance(point) >= planner.clearance - SDF_TOLERANCE:
+            return point
+    return planner.grid.cell_to_world(rows[k], cols[k])  # centres always have the clearance
 
 
 def sample_endpoint(rng: np.random.Generator, planner: AStarPlanner) -> np.ndarray:
