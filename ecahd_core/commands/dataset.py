@@ -26,6 +26,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--dense-points", type=int, default=4,
                    help="points P^l per local segment between sparse waypoints (DD)")
     p.add_argument("--full-points", type=int, default=100, help="points per full path (FD)")
+    p.add_argument("--expert", choices=("auto", "exact", "coarse"), default="auto",
+                   help="exact: A* on the map's cells; coarse: A* on 0.3 m blocks made exact on "
+                        "the cells, for large maps; auto: exact up to 50 000 cells")
+    p.add_argument("--workers", type=int, default=None,
+                   help="processes for the coarse expert (default: one per CPU; the data do "
+                        "not depend on it)")
     p.add_argument("--out", required=True, help="dataset file to write (.npz)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -43,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
         grid, pairs=args.pairs, seed=args.seed, footprint_spec=args.robot, padding=args.padding,
         min_distance=args.min_distance, sparse_horizon=args.sparse_horizon,
         dense_points=args.dense_points, full_points=args.full_points,
-        progress=not args.no_progress)
+        progress=not args.no_progress, expert=args.expert, workers=args.workers)
     elapsed = time.perf_counter() - t0
     out = dataset.save(args.out)
 
@@ -51,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
     rejected = p["rejected_short"] + p["rejected_unreachable"]
     size_mb = Path(out).stat().st_size / 1e6
     print(f"map {grid.name} ({grid.fingerprint()}), robot {p['footprint']} "
-          f"(clearance {p['clearance']:.3f} m), seed {p['seed']}")
+          f"(clearance {p['clearance']:.3f} m), seed {p['seed']}, expert {p['expert']}")
     print(f"kept {dataset.num_pairs} pairs of {p['attempts']} drawn; rejected {rejected} "
           f"({100.0 * rejected / p['attempts']:.1f} %: {p['rejected_short']} shorter than "
           f"{p['min_distance']} m, {p['rejected_unreachable']} unreachable)")
