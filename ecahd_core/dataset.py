@@ -104,6 +104,35 @@ def resample_by_arclength(path, n: int) -> np.ndarray:
     return out
 
 
+def split_by_arclength(path, k: int) -> list[np.ndarray]:
+    """Cut a polyline into ``k`` pieces of equal arc length.
+
+    path: (N, 2) [m] -> k arrays (n_i, 2) float64 [m]; each piece holds the path's vertices
+    strictly inside it, piece i ends exactly where piece i + 1 starts, the first starts at the
+    path's first point and the last ends at its last point.
+    """
+    if int(k) != k or k < 1:
+        raise TrajectoryError(f"splitting needs k >= 1 pieces, got {k!r}")
+    pts = _as_path(path)
+    cum = cumulative_arclength(pts)
+    cuts = points_at_arclength(pts, np.linspace(0.0, cum[-1], int(k) + 1))  # (k + 1, 2)
+    cuts[0], cuts[-1] = pts[0], pts[-1]
+    s_cut = np.linspace(0.0, cum[-1], int(k) + 1)
+    pieces = []
+    for i in range(int(k)):
+        inner = pts[(cum > s_cut[i]) & (cum < s_cut[i + 1])]
+        pieces.append(np.concatenate([cuts[i:i + 1], inner, cuts[i + 1:i + 2]]))
+    return pieces
+
+
+def chunk_count(length: float, sparse_horizon: int, max_spacing: float | None) -> int:
+    """How many equal pieces a path of ``length`` [m] is cut into so that its P^g sparse
+    waypoints lie at most ``max_spacing`` [m] apart along it (1 if ``max_spacing`` is None)."""
+    if max_spacing is None:
+        return 1
+    return max(1, math.ceil(length / ((sparse_horizon - 1) * max_spacing) - 1e-9))
+
+
 def _as_path(path) -> np.ndarray:
     pts = np.asarray(path, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 1:
@@ -367,7 +396,8 @@ def generate_dataset(grid: GridMap, *, pairs: int, seed: int, footprint_spec: st
                      dense_points: int = 4, full_points: int = 100, progress: bool = True,
                      max_attempts: int | None = None, expert: str = "auto",
                      workers: int | None = None,
-                     coarse_block_size: float = COARSE_BLOCK_SIZE) -> ExpertDataset:
+                     coarse_block_size: float = COARSE_BLOCK_SIZE,
+                     max_spacing: float | None = None) -> ExpertDataset:
     """Plan ``pairs`` expert paths between seeded random start/goal pairs (paper Sec. IV-A).
 
     Starts and goals are drawn uniformly from the clearance-free space (clearance = the
@@ -380,6 +410,13 @@ def generate_dataset(grid: GridMap, *, pairs: int, seed: int, footprint_spec: st
     about ``coarse_block_size`` [m]; ``workers`` processes, default one per CPU, results
     independent of their number) or "auto" (exact for at most ``EXACT_MAX_CELLS`` map cells).
     The exact expert always runs in this process.
+
+    ``max_spacing`` [m] (default None: off) bounds the arc length between consecutive sparse
+    waypoints: a path longer than (P^g - 1) * max_spacing is cut into the fewest equal pieces
+    (:func:`chunk_count`, :func:`split_by_arclength`) that meet it, and every piece is one
+    sample, its ends the sample's start and goal (so one attempt may give several samples; the
+    last attempt's extra pieces are dropped). It keeps the waypoint spacing of a large map's
+    data within what SD learnt on maze2d-large (0.4-1.9 m) at the price of shorter plans.
 
     Raises:
         DatasetError: bad parameters, no clearance-free space, or fewer than ``pairs`` kept
@@ -399,6 +436,10 @@ def generate_dataset(grid: GridMap, *, pairs: int, seed: int, footprint_spec: st
             and coarse_block_size > 0):
         raise DatasetError(f"coarse_block_size must be a finite number > 0 m, "
                            f"got {coarse_block_size!r}")
+    if max_spacing is not None and not (isinstance(max_spacing, (int, float))
+                                        and math.isfinite(max_spacing) and max_spacing > 0):
+        raise DatasetError(f"max_spacing must be None or a finite number > 0 m, "
+                           f"got {max_spacing!r}")
     if max_attempts is None:
         max_attempts = 20 * pairs + 100
     if expert == "auto":
@@ -411,7 +452,8 @@ def generate_dataset(grid: GridMap, *, pairs: int, seed: int, footprint_spec: st
     if not planner.mask.any():
         raise DatasetError(f"no cell of map {grid.name!r} is {clearance:.3f} m away from the "
                            f"obstacles, the clearance robot {footprint.name!r} needs")
-    views = dict(sparse_horizon=sparse_horizon, dense_points=dense_points, full_points=full_points)
+    views = dict(sparse_horizon=sparse_horizon, dense_points=dense_points, full_points=full_points,
+                 max_spacing=max_spacing)
     run = _ExpertRun(pairs=pairs, max_attempts=max_attempts, min_distance=min_distance,
                      grid=grid, progress=progress)
     extra = {}
@@ -426,6 +468,8 @@ def generate_dataset(grid: GridMap, *, pairs: int, seed: int, footprint_spec: st
         run.coarse(coarse, seed, views, workers)
         extra = {"expert_block": coarse.block,
                  "sampling": "attempt i seeded (seed, i), largest clearance-free region"}
+    if max_spacing is not None:
+        extra.update(max_spacing=float(max_spacing), split_paths=run.split_paths)
     elapsed = time.perf_counter() - t0
     log.info("kept %d expert paths in %d attempts (%d too short, %d unreachable) in %.1f s",
              pairs, run.attempts, run.rejected_short, run.rejected_unreachable, elapsed)
@@ -485,6 +529,7 @@ class _ExpertRun:
         self.starts: list[np.ndarray] = []
         self.goals: list[np.ndarray] = []
         self.attempts = self.rejected_short = self.rejected_unreachable = 0
+        self.split_paths = 0  # paths cut into pieces (max_spacing)
 
     def _bar(self, what: str):
         from tqdm import tqdm
@@ -501,19 +546,21 @@ class _ExpertRun:
                 "lower min_distance")
 
     def _record(self, outcome, bar) -> None:
-        """Count one attempt's outcome: ("ok", start, goal, sample), ("short",) or
-        ("unreachable",)."""
+        """Count one attempt's outcome: ("ok", [(start, goal, sample), ...]) (one per piece of
+        the path), ("short",) or ("unreachable",)."""
         self.attempts += 1
         if outcome[0] == "unreachable":
             self.rejected_unreachable += 1
         elif outcome[0] == "short":
             self.rejected_short += 1
         else:
-            _, start, goal, sample = outcome
-            self.samples.append(sample)
-            self.starts.append(start)
-            self.goals.append(goal)
-            bar.update(1)
+            pieces = outcome[1]
+            self.split_paths += len(pieces) > 1
+            for start, goal, sample in pieces[:self.pairs - len(self.samples)]:
+                self.samples.append(sample)
+                self.starts.append(start)
+                self.goals.append(goal)
+                bar.update(1)
 
     def exact(self, planner: AStarPlanner, rng: np.random.Generator, views: dict) -> None:
         """Fine-grid A*, pairs drawn one after the other from ``rng`` (the shipped data)."""
@@ -576,14 +623,21 @@ def _coarse_attempt(task, index: int):
 
 def _plan_attempt(planner, start: np.ndarray, goal: np.ndarray, min_distance: float,
                   views: dict):
-    """Plan one pair: ("ok", start, goal, ExpertSample), ("short",) or ("unreachable",)."""
+    """Plan one pair: ("ok", [(start, goal, ExpertSample), ...]) (the path's pieces, see
+    ``max_spacing`` in :func:`generate_dataset`), ("short",) or ("unreachable",)."""
     try:
         path = planner.plan(start, goal)
     except PlanningError:
         return ("unreachable",)
-    if path_length(path) < min_distance:
+    length = path_length(path)
+    if length < min_distance:
         return ("short",)
-    return ("ok", start, goal, expert_sample(path, **views))
+    views = dict(views)
+    k = chunk_count(length, views["sparse_horizon"], views.pop("max_spacing"))
+    if k == 1:
+        return ("ok", [(start, goal, expert_sample(path, **views))])
+    return ("ok", [(piece[0], piece[-1], expert_sample(piece, **views))
+                   for piece in split_by_arclength(path, k)])
 
 
 def _sample_in_cells(rng: np.random.Generator, planner: AStarPlanner, cells) -> np.ndarray:

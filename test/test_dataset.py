@@ -7,9 +7,9 @@ import pytest
 
 from ecahd_core.astar import AStarPlanner
 from ecahd_core.commands import dataset as dataset_command
-from ecahd_core.dataset import (DATASET_VERSION, EXACT_MAX_CELLS, ExpertDataset, expert_sample,
-                                file_sha256, generate_dataset, points_at_arclength,
-                                resample_by_arclength)
+from ecahd_core.dataset import (DATASET_VERSION, EXACT_MAX_CELLS, ExpertDataset, chunk_count,
+                                expert_sample, file_sha256, generate_dataset, points_at_arclength,
+                                resample_by_arclength, split_by_arclength)
 from ecahd_core.errors import DatasetError, TrajectoryError
 from ecahd_core.mapgen import MapGenConfig, generate_map
 from ecahd_core.maps import builtin_map
@@ -197,6 +197,39 @@ def test_coarse_expert_data_do_not_depend_on_the_worker_count(office, office_ds,
         generate_dataset(office, pairs=1, seed=0, expert="fast", progress=False)
     with pytest.raises(DatasetError, match="workers"):
         generate_dataset(office, pairs=1, seed=0, workers=0, progress=False)
+
+
+# ----------------------------------------------------------------------- waypoint spacing
+def test_split_by_arclength():
+    # legs of 2 m along x then 2 m along y, in 2 pieces: the cut is the corner, in 3 pieces the
+    # cuts lie 4/3 m and 8/3 m along the path
+    path = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0]])
+    a, b = split_by_arclength(path, 2)
+    np.testing.assert_allclose(a, [[0, 0], [2, 0]])
+    np.testing.assert_allclose(b, [[2, 0], [2, 2]])
+    pieces = split_by_arclength(path, 3)
+    np.testing.assert_allclose([p[-1] for p in pieces], [[4 / 3, 0], [2, 2 / 3], [2, 2]])
+    np.testing.assert_allclose(pieces[1], [[4 / 3, 0], [2, 0], [2, 2 / 3]])
+    assert all(np.array_equal(p[-1], q[0]) for p, q in zip(pieces, pieces[1:]))
+    with pytest.raises(TrajectoryError, match="k >= 1"):
+        split_by_arclength(path, 0)
+    # P^g = 10 waypoints at most 1.5 m apart: one piece up to 13.5 m, two up to 27 m
+    assert [chunk_count(L, 10, 1.5) for L in (3.0, 13.5, 13.6, 27.0, 27.1)] == [1, 1, 2, 2, 3]
+    assert chunk_count(100.0, 10, None) == 1
+
+
+def test_max_spacing_cuts_long_paths(office, office_ds):
+    cut = generate_dataset(office, pairs=8, seed=2, workers=1, max_spacing=0.5, progress=False)
+    spacing = cut.lengths / (PG - 1)  # sparse waypoints are evenly spaced by arc length
+    assert np.all(spacing <= 0.5 + 1e-5)
+    assert cut.params["max_spacing"] == 0.5 and cut.params["split_paths"] >= 1
+    assert cut.params["attempts"] < office_ds.params["attempts"]  # pieces of one path count
+    assert np.array_equal(cut.starts[0], office_ds.starts[0])  # the first piece starts there
+    # consecutive pieces of one path: one's goal is the next one's start
+    assert any(np.array_equal(g, s) for g, s in zip(cut.goals[:-1], cut.starts[1:]))
+    assert "max_spacing" not in office_ds.params
+    with pytest.raises(DatasetError, match="max_spacing"):
+        generate_dataset(office, pairs=1, seed=0, max_spacing=0.0, progress=False)
 
 
 # ---------------------------------------------------------------------------------- files

@@ -32,6 +32,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=int, default=None,
                    help="processes for the coarse expert (default: one per CPU; the data do "
                         "not depend on it)")
+    p.add_argument("--max-spacing", type=float, default=None,
+                   help="[m] cut longer paths into pieces so that the sparse waypoints lie at "
+                        "most this far apart (maze2d-large's data: 0.4-1.9 m); default: off")
     p.add_argument("--out", required=True, help="dataset file to write (.npz)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -49,7 +52,8 @@ def run(args: argparse.Namespace) -> int:
         grid, pairs=args.pairs, seed=args.seed, footprint_spec=args.robot, padding=args.padding,
         min_distance=args.min_distance, sparse_horizon=args.sparse_horizon,
         dense_points=args.dense_points, full_points=args.full_points,
-        progress=not args.no_progress, expert=args.expert, workers=args.workers)
+        progress=not args.no_progress, expert=args.expert, workers=args.workers,
+        max_spacing=args.max_spacing)
     elapsed = time.perf_counter() - t0
     out = dataset.save(args.out)
 
