@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -37,13 +38,19 @@ def layout_to_msg(layout, stamp: Time | None = None) -> OccupancyGrid:
 
 def msg_to_grid(msg: OccupancyGrid, *, unknown_is_occupied: bool = True,
                 name: str = "occupancy_grid") -> GridMap:
-    """nav_msgs/OccupancyGrid -> GridMap; raises MapError for a malformed or rotated grid.
+    """nav_msgs/OccupancyGrid -> GridMap; raises MapError for a malformed or rotated grid
+    (a non-finite or zero origin quaternion included).
 
     The message carries the resolution as float32 (0.1 arrives as 0.10000000149); it is restored
     to the shortest decimal that float32 value stands for, so a map keeps its fingerprint (and
     the models trained for it still load) after a trip through a message."""
     q = msg.info.origin.orientation
-    if abs(q.x) > 1e-6 or abs(q.y) > 1e-6 or abs(q.z) > 1e-6:
+    quaternion = (q.x, q.y, q.z, q.w)
+    if not all(math.isfinite(v) for v in quaternion):
+        raise MapError(f"OccupancyGrid origin orientation is not finite: {quaternion}")
+    if abs(q.w) < 1e-6 and max(abs(q.x), abs(q.y), abs(q.z)) < 1e-6:
+        raise MapError("OccupancyGrid origin orientation is the zero quaternion")
+    if max(abs(q.x), abs(q.y), abs(q.z)) > 1e-6 * max(1.0, abs(q.w)):
         raise MapError("OccupancyGrid with a rotated origin is not supported")
     resolution = float(str(np.float32(msg.info.resolution)))
     return from_occupancy_grid(np.asarray(msg.data, dtype=np.int16), msg.info.width,

@@ -24,3 +24,14 @@ def ros_context():
     rclpy.init(context=context, domain_id=ROS_DOMAIN_ID)
     yield context
     rclpy.try_shutdown(context=context)
+
+
+def spin_until(executor, condition, timeout: float = 10.0, what: str = "condition") -> None:
+    """Spin ``executor`` in 10 ms slices until ``condition()`` holds; fail the test naming
+    ``what`` after ``timeout`` seconds of wall time."""
+    import time
+
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < deadline, f"not within {timeout:g} s: {what}"
+        executor.spin_once(timeout_sec=0.01)
