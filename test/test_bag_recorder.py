@@ -19,20 +19,13 @@ from rosbags.typesys import get_typestore  # noqa: E402
 from std_msgs.msg import Bool, String  # noqa: E402
 
 import ecahd_ros.bag_recorder as bag_recorder  # noqa: E402
+from conftest import spin_until  # noqa: E402
 from ecahd_core.maps import builtin_map  # noqa: E402
 from ecahd_ros.bag_recorder import BagError, BagRecorder, read_bag  # noqa: E402
 from ecahd_ros.conversions import grid_to_msg  # noqa: E402
 from ecahd_ros.qos import MAP_QOS  # noqa: E402
 
 N = 20  # messages per streamed topic
-
-
-
-def spin_until(executor, condition, timeout: float = 10.0) -> None:
-    deadline = time.monotonic() + timeout
-    while not condition():
-        assert time.monotonic() < deadline, "condition not met within the time limit"
-        executor.spin_once(timeout_sec=0.01)
 
 
 def _odom(i: int) -> Odometry:

@@ -16,6 +16,7 @@ from geometry_msgs.msg import PoseStamped  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 
+from conftest import spin_until  # noqa: E402
 from ecahd_ros.global_planner import GlobalPlanner  # noqa: E402
 from ecahd_ros.local_refiner import LocalRefiner  # noqa: E402
 from sim_bridge.node import SimBridge  # noqa: E402
@@ -58,9 +59,7 @@ class Graph:
         self.refiner = None
 
     def spin_until(self, condition, what: str) -> None:
-        while not condition():
-            assert time.monotonic() < self.deadline, f"not within {WALL_LIMIT} s: {what}"
-            self.executor.spin_once(timeout_sec=0.01)
+        spin_until(self.executor, condition, self.deadline - time.monotonic(), what)
 
     @property
     def state(self):
