@@ -31,6 +31,7 @@ Frames and units: map frame, metres; a cell (row, col) is the square
 """
 from __future__ import annotations
 
+import array
 import heapq
 import math
 from dataclasses import dataclass
@@ -489,7 +490,7 @@ class CoarseAStarPlanner:
         self._dst: list[int] = dst.tolist()
         self._cost: list[float] = cost.tolist()
         # node of each cell of the fine planner's padded flat layout (-1 off the mask)
-        self._label_flat: list[int] = np.pad(labels, 1, constant_values=-1).reshape(-1).tolist()
+        self._label_flat = array.array("i", np.pad(labels, 1, constant_values=-1).tobytes())
         self._joins: dict[tuple[int, int], list] = {}  # (node, node) -> inner points [m]
         self._landmark_dist = self._landmarks(COARSE_LANDMARKS)  # (K, N) [cells]
 
