@@ -260,6 +260,16 @@ def _wrap(angle):
     return np.pi - np.mod(np.pi - angle, 2 * np.pi)
 
 
+def pose_depths(poses, footprint: Footprint, grid: GridMap) -> np.ndarray:
+    """The exact overlap depth of single poses: (N, 3) x [m], y [m], heading [rad] -> (N,)
+    [m], > ``DEFAULT_TOLERANCE`` where the footprint placed there overlaps an occupied cell
+    (<= 0 or -inf: free). The same test :func:`check_collision` applies to every dense pose."""
+    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    if not np.all(np.isfinite(poses)):
+        raise TrajectoryError("poses must be finite")
+    return _pose_depths(poses, footprint, grid)
+
+
 def _pose_depths(poses: np.ndarray, footprint: Footprint, grid: GridMap) -> np.ndarray:
     """(N, 3) poses -> (N,) largest overlap depth [m] with any occupied cell (<= 0: none)."""
     res = grid.resolution

@@ -93,6 +93,10 @@ class ScanUpdate:
     ignored: int
 
 
+HIT_DEPTH = 0.25  # [cells] a return is marked this far beyond its hit point along the ray
+KNOWN_MARGIN = 1  # [cells] marks this close to a static obstacle belong to it (for_map)
+
+
 class LocalCostmap:
     """A rolling window of obstacle marks centred on the robot (see the module docstring).
 
@@ -123,11 +127,23 @@ class LocalCostmap:
         self._seen = np.zeros((n, n), dtype=bool)  # (n, n) observed (marked or cleared) once
         self._row0 = self._col0 = None  # lattice indices of the window's cell (0, 0)
         self._static: tuple | None = None  # (grid, (margin, dilation), its CostMap)
+        self._known: np.ndarray | None = None  # (H, W) bool the static map's (grown) obstacles
 
     @classmethod
-    def for_map(cls, grid: GridMap, config: LocalCostmapConfig | None = None) -> LocalCostmap:
-        """A window on ``grid``'s resolution and cell lattice."""
-        return cls(resolution=grid.resolution, lattice_origin=grid.origin, config=config)
+    def for_map(cls, grid: GridMap, config: LocalCostmapConfig | None = None, *,
+                known_margin: int = KNOWN_MARGIN) -> LocalCostmap:
+        """A window on ``grid``'s resolution and cell lattice. Marks on or within
+        ``known_margin`` cells of one of ``grid``'s obstacles are that obstacle (LiDAR noise
+        and rounding along known walls): :meth:`obstacle_mask` leaves them out."""
+        window = cls(resolution=grid.resolution, lattice_origin=grid.origin, config=config)
+        known = grid.occupied.astype(np.uint8)
+        if known_margin > 0:
+            import cv2
+
+            size = 2 * known_margin + 1
+            known = cv2.dilate(known, np.ones((size, size), np.uint8))
+        window._known = known.astype(bool)
+        return window
 
     # ---------------------------------------------------------------------------- geometry
     @property
@@ -222,9 +238,11 @@ class LocalCostmap:
             length = np.minimum(length, min(cfg.raytrace_range, reach))  # (N,) [m]
             cleared = self._clear_rays(su, sv, dx, dy, length, np.where(stop_at_return, r, np.nan))
 
-        # mark the cell of every return in range
-        hu = su + r[hit] * dx[hit] / res  # (H,) continuous column of the returns
-        hv = sv + r[hit] * dy[hit] / res
+        # mark the cell of every return in range, a little beyond the hit point along the ray
+        # (a wall's surface on a cell boundary belongs to the wall's cell, not the free one)
+        depth = r[hit] / res + HIT_DEPTH  # (H,) [cells]
+        hu = su + depth * dx[hit]  # (H,) continuous column of the returns
+        hv = sv + depth * dy[hit]
         col, row = np.floor(hu).astype(np.int64), np.floor(hv).astype(np.int64)
         inside = (col >= 0) & (col < n) & (row >= 0) & (row < n)
         flat = row[inside] * n + col[inside]  # (H',) window cells of the returns
@@ -273,8 +291,17 @@ class LocalCostmap:
 
     # ------------------------------------------------------------------------------ access
     def obstacle_mask(self) -> np.ndarray:
-        """(n, n) bool: window cells holding a mark (row 0 = lowest y)."""
-        return self._last_seen > _UNMARKED
+        """(n, n) bool: window cells holding a mark (row 0 = lowest y), without the marks of
+        known obstacles (:meth:`for_map`)."""
+        mask = self._last_seen > _UNMARKED
+        if self._known is None or self._row0 is None:
+            return mask
+        n, (H, W) = self.cells, self._known.shape
+        r0, c0 = self._row0, self._col0
+        rs, re, cs, ce = max(0, r0), min(H, r0 + n), max(0, c0), min(W, c0 + n)
+        if rs < re and cs < ce:
+            mask[rs - r0:re - r0, cs - c0:ce - c0] &= ~self._known[rs:re, cs:ce]
+        return mask
 
     def points(self) -> np.ndarray:
         """(M, 2) world (x, y) [m] of the centres of the marked cells (e.g. for the

@@ -544,6 +544,9 @@ class SegmentRefiner:
     (:meth:`~ecahd_core.planner.HierarchicalPlanner.local_stage`: the straight LocalPlan, J,
     DD above c_th, keep-better, polishing; both ends fixed) judged by the exact checker.
 
+    When the refined plan still collides by the exact checker: the straight plan if the exact
+    checker finds it free (J's c_th is only a trigger), else the cheapest of ``retries`` fresh
+    DD samples (one batch, polished) that it finds free; else the segment is blocked.
     A local plan that starts in contact (the robot already touches a wall) is safe when it goes
     no deeper than its start: it leads out. With ``exact`` False every plan counts as safe (the
     paper's ablations, which follow straight segments whatever they hit).
@@ -554,9 +557,11 @@ class SegmentRefiner:
         generator: the DD sampler's torch.Generator (a seed reproduces the plans).
     """
 
-    def __init__(self, planner, grid, footprint, *, generator=None, exact: bool = True) -> None:
+    def __init__(self, planner, grid, footprint, *, generator=None, exact: bool = True,
+                 retries: int = 8) -> None:
         self.planner, self.grid, self.footprint = planner, grid, footprint
         self.generator = generator
+        self.retries = retries  # fresh DD samples when the refined plan still collides
         self.exact = exact  # False: every plan counts as safe (the paper's ablations)
 
     def set_world(self, grid, costmap) -> None:
@@ -586,9 +591,107 @@ class SegmentRefiner:
         stage = self.planner.local_stage(torch.as_tensor(a, dtype=torch.float32),
                                          torch.as_tensor(b, dtype=torch.float32),
                                          end_fixed=True, generator=self.generator)
-        plan = stage.plan.detach().numpy().astype(np.float64)
-        plan[0], plan[-1] = a, b  # exact ends (the models work in float32)
+        plan = self._exact_ends(stage.plan, a, b)
         safe = self.judge(plan)
-        return SegmentResult(plan=plan, c_before=stage.c_before, c_after=stage.c_after,
+        c_after = stage.c_after
+        if not safe and (stage.dd_used or stage.polished):
+            # the exact checker has the last word: a straight plan it finds free is never
+            # replaced by a colliding DD plan, and fresh DD samples get a chance
+            straight = np.linspace(a, b, len(plan))
+            if self.judge(straight):
+                plan, safe, c_after = straight, True, stage.c_before
+            elif self.retries > 0 and self.planner.dd is not None:
+                segs, costs = self.planner.resample_segment(
+                    torch.as_tensor(a, dtype=torch.float32),
+                    torch.as_tensor(b, dtype=torch.float32), samples=self.retries,
+                    generator=self.generator)
+                for i in np.argsort(costs.numpy()):
+                    candidate = self._exact_ends(segs[i], a, b)
+                    if self.judge(candidate):
+                        plan, safe, c_after = candidate, True, float(costs[i])
+                        break
+        return SegmentResult(plan=plan, c_before=stage.c_before, c_after=c_after,
                              stage="dd" if stage.dd_used else "j_check", safe=safe,
                              ms=(time.perf_counter() - t0) * 1e3, polished=stage.polished)
+
+    @staticmethod
+    def _exact_ends(plan, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        out = plan.detach().numpy().astype(np.float64)
+        out[0], out[-1] = a, b  # exact ends (the models work in float32)
+        return out
+
+
+def detour(grid, footprint, start, goal, *, reach: float = 0.6) -> np.ndarray:
+    """A path round what ``grid`` knows (e.g. the static map fused with the local costmap):
+    A* with the footprint's clearance between the traversable cells nearest ``start`` and
+    ``goal`` (within ``reach`` m, in one connected region), joined to both by a straight hop,
+    so a pose or goal in a cell whose clearance A*'s grid rounds down still gets a path (the
+    exact checker judges every hop). start, goal: (2,) [m] -> (N, 2) [m], start first, goal
+    last. Raises PlanningError when no region holds both."""
+    from ecahd_core.astar import AStarPlanner, clearance_for_footprint
+
+    planner = AStarPlanner(grid, clearance_for_footprint(footprint))
+    start, goal = (np.asarray(p, dtype=np.float64).reshape(2) for p in (start, goal))
+    rows, cols = np.nonzero(planner.mask)
+    centres = grid.cell_to_world(rows, cols)  # (K, 2) traversable cell centres
+    labels = planner.components[rows, cols]
+    d_start = np.linalg.norm(centres - start, axis=1)
+    d_goal = np.linalg.norm(centres - goal, axis=1)
+    best = None
+    for label in np.unique(labels[(d_start <= reach)]):
+        ds = np.where(labels == label, d_start, np.inf)
+        dg = np.where(labels == label, d_goal, np.inf)
+        i, j = int(np.argmin(ds)), int(np.argmin(dg))
+        if dg[j] <= reach and (best is None or ds[i] + dg[j] < best[0]):
+            best = (ds[i] + dg[j], i, j)
+    if best is None:
+        raise PlanningError(f"no path with the footprint's clearance joins ({start[0]:.2f}, "
+                            f"{start[1]:.2f}) and ({goal[0]:.2f}, {goal[1]:.2f}) on what is "
+                            "known")
+    _, i, j = best
+    middle = planner.plan(centres[i], centres[j])
+    return np.concatenate([start[None], middle, goal[None]])
+
+
+SNAP_DISTANCE = 0.2  # [m] a waypoint in collision moves at most this far (< waypoint_tolerance)
+SNAP_STEP = 0.025  # [m] spacing of the candidate positions searched
+
+
+def snap_waypoints(grid, footprint, waypoints, *, max_distance: float = SNAP_DISTANCE,
+                   step: float = SNAP_STEP) -> tuple[np.ndarray, int]:
+    """Move every waypoint after the first that the exact checker finds in collision (the
+    footprint placed there, facing along its incoming segment) to the nearest free position
+    within ``max_distance`` [m] (a square lattice of ``step``). Sparse Diffusion's waypoints
+    carry ~0.1-0.2 m of error, so a 0.4 m circle in a 1 m corridor often gets a waypoint in a
+    wall, which no local plan ending there can avoid. A waypoint with no free position within
+    reach stays (the local stage then reports its segment blocked).
+
+    waypoints: (P, 2) [m] -> (snapped (P, 2), how many moved)."""
+    from ecahd_core.collision import DEFAULT_TOLERANCE, pose_depths
+
+    xy = np.asarray(waypoints, dtype=np.float64).reshape(-1, 2).copy()
+    if len(xy) < 2:
+        return xy, 0
+    d = np.diff(xy, axis=0)
+    heading = np.concatenate([[0.0], np.arctan2(d[:, 1], d[:, 0])])  # (P,) incoming
+    depth = pose_depths(np.column_stack([xy, heading]), footprint, grid)
+    bad = [i for i in np.flatnonzero(depth > DEFAULT_TOLERANCE) if i > 0]
+    if not bad:
+        return xy, 0
+    n = int(max_distance / step)
+    off = np.stack(np.meshgrid(np.arange(-n, n + 1), np.arange(-n, n + 1)), -1).reshape(-1, 2)
+    off = off * step
+    dist = np.linalg.norm(off, axis=1)
+    off, dist = off[dist <= max_distance + 1e-9], dist[dist <= max_distance + 1e-9]
+    order = np.argsort(dist, kind="stable")
+    off = off[order]  # (K, 2) nearest first
+    moved = 0
+    for i in bad:
+        cand = xy[i] + off
+        inside = grid.in_bounds(cand)
+        poses = np.column_stack([cand, np.full(len(cand), heading[i])])[inside]
+        free = np.flatnonzero(pose_depths(poses, footprint, grid) <= DEFAULT_TOLERANCE)
+        if len(free):
+            xy[i] = poses[free[0], :2]
+            moved += 1
+    return xy, moved

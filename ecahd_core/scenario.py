@@ -264,3 +264,144 @@ def write_scenario(path: str | os.PathLike, obstacles) -> Path:
                           default_flow_style=None, sort_keys=False)
     path.write_text(text)
     return path
+
+
+# ----------------------------------------------------------------------------- generation
+def rasterize(grid, obstacles, t: float = 0.0):
+    """``grid`` (a GridMap) with the cells that the obstacles' footprints at time t touch made
+    occupied (100): the world the robot would have to plan in if it knew them."""
+    import cv2
+
+    from ecahd_core.maps import GridMap
+
+    data = grid.data.copy()
+    mask = np.zeros(data.shape, dtype=np.uint8)
+    for poly in obstacle_footprints(obstacles, t):
+        cells = (poly - np.asarray(grid.origin)) / grid.resolution - 0.5  # cell-centre units
+        cv2.fillPoly(mask, [np.round(cells * 16).astype(np.int32)], 1, lineType=cv2.LINE_8,
+                     shift=4)
+    data[mask.astype(bool)] = 100
+    return GridMap(data, grid.resolution, grid.origin, name=grid.name, frame_id=grid.frame_id,
+                   unknown_is_occupied=grid.unknown_is_occupied,
+                   occupied_threshold=grid.occupied_threshold)
+
+
+@dataclass(frozen=True)
+class GeneratedScenario:
+    """A seeded benchmark scenario (:func:`generate_scenario`).
+
+    Attributes:
+        obstacles: the static ones first, then the moving ones.
+        kinds: per obstacle "narrowing" (the route keeps its length within 0.5 m: a passage
+            remains), "blocking" (only a detour works) or "moving".
+        route: (N, 2) [m] the A* route through start and goals the obstacles were placed on.
+    """
+
+    obstacles: tuple[Obstacle, ...]
+    kinds: tuple[str, ...]
+    route: np.ndarray
+
+
+def generate_scenario(grid, footprint, stops, *, static: int, moving: int, seed: int,
+                      keep_clear: float = 1.2, spacing: float = 1.0,
+                      tries: int = 60) -> GeneratedScenario:
+    """Obstacles on the route a robot drives: ``stops`` (K, 2) [m] are the start then the goals
+    of the episodes in order. Static boxes (0.3-0.5 m sides) are dropped near the A* route
+    (clearance of ``footprint``) and kept only if every goal stays reachable for the footprint
+    with all of them in place (A* with clearance on the rasterised map); moving cylinders
+    (radius 0.15-0.2 m, 0.3-0.5 m/s) cross the route at right angles, from wall to wall (at
+    most 1.5 m each side). Nothing within ``keep_clear`` m of a stop, obstacles at least
+    ``spacing`` m apart (their paths' midpoints for moving ones). Raises ScenarioError when
+    the requested number cannot be placed in ``tries`` attempts each.
+
+    Returns a GeneratedScenario (the same for the same inputs and seed)."""
+    from ecahd_core.astar import AStarPlanner, clearance_for_footprint, path_length, \
+        plan_from_pose
+    from ecahd_core.controller import resample
+    from ecahd_core.errors import PlanningError
+
+    rng = np.random.default_rng(seed)
+    stops = np.asarray(stops, dtype=np.float64).reshape(-1, 2)
+    clearance = clearance_for_footprint(footprint)
+
+    def route_on(g) -> list[np.ndarray] | None:
+        planner = AStarPlanner(g, clearance)
+        try:
+            return [plan_from_pose(planner, a, b) for a, b in zip(stops[:-1], stops[1:])]
+        except PlanningError:
+            return None
+
+    legs = route_on(grid)
+    if legs is None:
+        raise ScenarioError("the episodes' goals are not reachable for the footprint even "
+                            "without obstacles")
+    route = resample(np.concatenate(legs), 0.1)
+    base_length = sum(path_length(leg) for leg in legs)
+    far = np.min(np.linalg.norm(route[:, None] - stops[None], axis=2), axis=1) > keep_clear
+    candidates = route[far]
+    if len(candidates) == 0 and static + moving > 0:
+        raise ScenarioError(f"no route point lies {keep_clear} m from every start and goal")
+    tangent = np.gradient(route, axis=0)
+    tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-9)
+    tangents = tangent[far]
+
+    obstacles: list[Obstacle] = []
+    kinds: list[str] = []
+
+    def spaced(p: np.ndarray) -> bool:
+        return all(np.linalg.norm(p - _centre(o)) >= spacing for o in obstacles)
+
+    for _ in range(static):
+        for _attempt in range(tries):
+            i = int(rng.integers(len(candidates)))
+            if not spaced(candidates[i]):
+                continue
+            normal = np.array([-tangents[i, 1], tangents[i, 0]])
+            centre = candidates[i] + rng.uniform(-0.3, 0.3) * normal
+            box = Obstacle("box", float(centre[0]), float(centre[1]),
+                           yaw=float(rng.uniform(-math.pi, math.pi)),
+                           size=(float(rng.uniform(0.3, 0.5)), float(rng.uniform(0.3, 0.5))))
+            legs = route_on(rasterize(grid, [*obstacles, box]))
+            if legs is not None:
+                longer = sum(path_length(leg) for leg in legs) - base_length
+                obstacles.append(box)
+                kinds.append("blocking" if longer > 0.5 else "narrowing")
+                break
+        else:
+            raise ScenarioError(f"could not place static obstacle {len(obstacles) + 1} of "
+                                f"{static} keeping every goal reachable")
+    for _ in range(moving):
+        for _attempt in range(tries):
+            i = int(rng.integers(len(candidates)))
+            if not spaced(candidates[i]):
+                continue
+            normal = np.array([-tangents[i, 1], tangents[i, 0]])
+            radius = float(rng.uniform(0.15, 0.2))
+            ends = []
+            for sign in (1.0, -1.0):
+                d = 0.0
+                while d < 1.5:
+                    p = candidates[i] + sign * (d + 0.05 + radius) * normal
+                    if not (grid.in_bounds(p[None])[0] and grid.is_free(p[None])[0]):
+                        break
+                    d += 0.05
+                ends.append(candidates[i] + sign * d * normal)
+            if np.linalg.norm(ends[0] - ends[1]) < 0.6:
+                continue
+            obstacles.append(Obstacle("cylinder", float(ends[0][0]), float(ends[0][1]),
+                                      radius=radius,
+                                      path=(tuple(map(float, ends[0])), tuple(map(float, ends[1]))),
+                                      speed=float(rng.uniform(0.3, 0.5))))
+            kinds.append("moving")
+            break
+        else:
+            raise ScenarioError(f"could not place moving obstacle {len(kinds) - static + 1} "
+                                f"of {moving} across the route")
+    return GeneratedScenario(tuple(obstacles), tuple(kinds), route)
+
+
+def _centre(o: Obstacle) -> np.ndarray:
+    """(2,) [m] a static obstacle's centre, a moving one's path midpoint."""
+    if o.moving:
+        return np.mean(np.asarray(o.path), axis=0)
+    return np.array([o.x, o.y])

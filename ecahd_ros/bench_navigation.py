@@ -65,8 +65,14 @@ VARIANTS: tuple[Variant, ...] = (
     Variant("astar", "A* + controller", {"method": "astar"}, {"dd_enabled": False}),
     Variant("fd", "FD, no local planner", {"method": "fd"},
             {"dd_enabled": False, "exact_check": False}),
+    # obstacles that are not on the map (issue 11)
+    Variant("ecahd-blind", "ECAHD without sensing", {"method": "sd"}, {"use_scan": False}),
+    Variant("monitor-only", "ECAHD, collision monitor alone", {"method": "sd"},
+            {"scan_in_plans": False}),
 )
 VARIANT_KEYS = tuple(v.key for v in VARIANTS)
+TABLE_III_VARIANTS = ("ecahd", "ecahd-no-dd", "astar", "fd")  # the default without obstacles
+OBSTACLE_VARIANTS = ("ecahd", "ecahd-blind", "astar", "monitor-only")  # the default with
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -77,11 +83,13 @@ class NavigationBenchSettings:
     seed: int = 0
     robot: str = "circle"
     map: str = "maze2d-large"
-    variants: tuple[str, ...] = VARIANT_KEYS
+    variants: tuple[str, ...] = TABLE_III_VARIANTS
     realtime_factor: float = 1.0
     max_steps: int = 800
     hold_steps: int = 10  # an episode ends once the goal is held this long (800: D4RL's length)
     domain_id: int | None = None  # the first variant's; the others count up. None: from the pid
+    obstacles: int = 0  # static boxes per episode (not on the map)
+    moving: int = 0  # moving cylinders per episode
 
 
 @dataclass
@@ -159,7 +167,8 @@ def run_navigation_benchmark(settings: NavigationBenchSettings, out: Path, *,
                             robot=settings.robot, map=settings.map, seed=settings.seed,
                             realtime_factor=settings.realtime_factor,
                             max_steps=settings.max_steps, hold_steps=settings.hold_steps,
-                            domain_id=base + i,
+                            domain_id=base + i, obstacles=settings.obstacles,
+                            moving=settings.moving,
                             planner_params=dict(variant.planner_params),
                             refiner_params=dict(variant.refiner_params))
         t0 = time.monotonic()
@@ -264,7 +273,12 @@ def command_line(settings: NavigationBenchSettings) -> str:
     d = NavigationBenchSettings()
     argv = ["ecahd", "bench", "navigation", "--episodes", str(settings.episodes), "--seed",
             str(settings.seed), "--robot", settings.robot, "--map", settings.map]
-    if tuple(settings.variants) != d.variants:
+    if settings.obstacles:
+        argv += ["--obstacles", str(settings.obstacles)]
+    if settings.moving:
+        argv += ["--moving", str(settings.moving)]
+    default = OBSTACLE_VARIANTS if settings.obstacles or settings.moving else d.variants
+    if tuple(settings.variants) != tuple(default):
         argv += ["--variants", *settings.variants]
     if settings.realtime_factor != d.realtime_factor:
         argv += ["--realtime-factor", f"{settings.realtime_factor:g}"]
@@ -314,9 +328,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--robot", default=d.robot,
                    help="footprint: circle | quadruped | humanoid | Nav2 polygon '[[x, y], ...]'")
     p.add_argument("--map", default=d.map, help="built-in maze with shipped models")
-    p.add_argument("--variants", nargs="+", choices=VARIANT_KEYS, default=list(d.variants),
+    p.add_argument("--variants", nargs="+", choices=VARIANT_KEYS, default=None,
                    help="which columns to run (ecahd: w/ DD, ecahd-no-dd: w/o DD, astar: A* + "
-                        "controller, fd: FD without a local planner)")
+                        "controller, fd: FD without a local planner; ecahd-blind: without "
+                        "sensing, monitor-only: scans reach only the collision monitor); "
+                        f"default {list(TABLE_III_VARIANTS)}, with obstacles "
+                        f"{list(OBSTACLE_VARIANTS)}")
     p.add_argument("--realtime-factor", type=float, default=d.realtime_factor,
                    help="sim seconds per wall second")
     p.add_argument("--max-steps", type=int, default=d.max_steps, help="control steps per episode")
@@ -333,6 +350,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--results", metavar="FILE",
                    help=f"put the table and command into FILE between {BEGIN} and {END}")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    from ecahd_ros.demo import add_obstacle_arguments
+
+    add_obstacle_arguments(p)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -341,11 +361,14 @@ def run(args: argparse.Namespace) -> int:
     if args.episodes < 1 or args.max_steps < 1 or args.hold_steps < 0:
         raise EcahdError("bench navigation needs --episodes >= 1, --max-steps >= 1 and "
                          "--hold-steps >= 0")
+    chosen = args.variants or (OBSTACLE_VARIANTS if args.obstacles or args.moving
+                               else TABLE_III_VARIANTS)
     settings = NavigationBenchSettings(
         episodes=args.episodes, seed=args.seed, robot=args.robot, map=args.map,
-        variants=tuple(k for k in VARIANT_KEYS if k in args.variants),
+        variants=tuple(k for k in VARIANT_KEYS if k in chosen),
         realtime_factor=args.realtime_factor, max_steps=args.max_steps,
-        hold_steps=args.hold_steps, domain_id=args.domain_id)
+        hold_steps=args.hold_steps, domain_id=args.domain_id, obstacles=args.obstacles,
+        moving=args.moving)
     out = (Path(args.out) if args.out
            else Path("runs") / time.strftime("bench-navigation-%Y%m%d-%H%M%S"))
     result = run_navigation_benchmark(settings, out, progress=not args.no_progress)

@@ -69,6 +69,11 @@ class DemoConfig:
     goals: tuple[tuple[float, float], ...] | None = None  # explicit goals; None: seeded problems
     start: tuple[float, float] | None = None  # explicit start; None: the first problem's
     wall_timeout: float = 540.0  # [s] the whole episode loop
+    # obstacles that are not on the map, per episode (ecahd_core.scenario.generate_scenario on
+    # the leg previous goal -> goal, seeded by seed and the episode): static boxes, moving
+    # cylinders
+    obstacles: int = 0
+    moving: int = 0
     domain_id: int | None = None  # None: derived from the process id
     # parameter overrides of the global_planner / local_refiner nodes (name -> value)
     planner_params: dict = field(default_factory=dict)
@@ -82,6 +87,8 @@ class DemoConfig:
         if not (math.isfinite(self.realtime_factor) and self.realtime_factor > 0):
             raise EcahdError(f"realtime_factor must be a finite number > 0 (planning runs "
                              f"concurrently: there is no lock-step), got {self.realtime_factor}")
+        if self.obstacles < 0 or self.moving < 0:
+            raise EcahdError("obstacles and moving must be >= 0")
         if self.goals is not None and len(self.goals) < self.episodes:
             raise EcahdError(f"{self.episodes} episodes need as many goals, got {self.goals}")
 
@@ -114,6 +121,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="control steps the reached goal is held before the next episode")
     p.add_argument("--domain-id", type=int, default=None,
                    help="ROS_DOMAIN_ID of the private context (default: from the process id)")
+    add_obstacle_arguments(p)
+
+
+def add_obstacle_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--obstacles", type=int, default=0,
+                   help="static boxes not on the map, per episode, on its route (every goal "
+                        "stays reachable for the footprint)")
+    p.add_argument("--moving", type=int, default=0,
+                   help="moving cylinders crossing each episode's route")
 
 
 def _node_parameters(config: DemoConfig, start) -> dict[str, dict]:
@@ -180,6 +196,23 @@ class NodeProcess:
         self._log.close()
 
 
+def _set_parameter(executor, client, name: str, value, spin, timeout: float = 10.0) -> None:
+    """Set a parameter of another node and wait for its answer (EcahdError if refused)."""
+    from rclpy.parameter import Parameter
+
+    from ecahd_core.errors import EcahdError
+
+    future = client.set_parameters([Parameter(name, value=value)])
+    t0 = time.monotonic()
+    while not future.done():
+        spin()
+        if time.monotonic() - t0 > timeout:
+            raise EcahdError(f"setting {name} timed out")
+    result = future.result().results[0]
+    if not result.successful:
+        raise EcahdError(f"{name} refused: {result.reason}")
+
+
 def _goals(config: DemoConfig):
     """(start (2,), [goal (2,), ...]) from the config or seeded problems on the map."""
     import numpy as np
@@ -194,6 +227,29 @@ def _goals(config: DemoConfig):
     problems = make_problems(load_map(config.map), config.episodes, seed=config.seed)
     start = np.asarray(config.start) if config.start is not None else problems[0].start
     return start, [p.goal for p in problems]
+
+
+def _scenarios(config: DemoConfig, start, goals) -> list[Path] | None:
+    """One scenario file per episode (OUT/scenarios/episode_<i>.yaml) with ``obstacles`` static
+    and ``moving`` moving obstacles on the leg (previous goal or start) -> goal, or None."""
+    if config.obstacles == 0 and config.moving == 0:
+        return None
+    from ecahd_core.footprint import make_footprint
+    from ecahd_core.maps import load_map
+    from ecahd_core.scenario import generate_scenario, write_scenario
+
+    grid, footprint = load_map(config.map), make_footprint(config.robot)
+    folder = config.out / "scenarios"
+    folder.mkdir(parents=True, exist_ok=True)
+    files, previous = [], start
+    for i, goal in enumerate(goals):
+        scenario = generate_scenario(grid, footprint, [previous, goal],
+                                     static=config.obstacles, moving=config.moving,
+                                     seed=config.seed * 1000 + i)
+        files.append(write_scenario(folder / f"episode_{i}.yaml", scenario.obstacles))
+        log.info("episode %d: obstacles %s", i, ", ".join(scenario.kinds))
+        previous = goal
+    return files
 
 
 def run_demo(config: DemoConfig) -> DemoResult:
@@ -213,6 +269,7 @@ def run_demo(config: DemoConfig) -> DemoResult:
 
     start, goals = _goals(config)
     config.out.mkdir(parents=True, exist_ok=True)
+    scenarios = _scenarios(config, start, goals)
     params = _node_parameters(config, start)
     domain = config.domain_id if config.domain_id is not None else 1 + os.getpid() % 100
     ctx = rclpy.context.Context()
@@ -286,7 +343,17 @@ def run_demo(config: DemoConfig) -> DemoResult:
                  time.monotonic() - t0, domain, len(goals))
 
         wall0, sim0 = time.monotonic(), state["odom"][2]
+        sim_params = None
+        if scenarios is not None:
+            from rclpy.parameter_client import AsyncParameterClient
+
+            sim_params = AsyncParameterClient(demo, "sim_bridge")
+            if not sim_params.wait_for_services(timeout_sec=10.0):
+                raise EcahdError("sim_bridge's parameter services did not come up")
         for i, goal in enumerate(goals):
+            if sim_params is not None:  # this episode's obstacles replace the last one's
+                _set_parameter(executor, sim_params, "obstacles_file", str(scenarios[i]),
+                               spin)
             msg = PoseStamped()
             msg.header.frame_id = "map"
             msg.header.stamp = demo.get_clock().now().to_msg()
@@ -355,7 +422,8 @@ def run(args: argparse.Namespace) -> int:
     config = DemoConfig(out=out, episodes=args.episodes, robot=args.robot, map=args.map,
                         seed=args.seed, realtime_factor=args.realtime_factor,
                         max_steps=args.max_steps, hold_steps=args.hold_steps,
-                        domain_id=args.domain_id)
+                        domain_id=args.domain_id, obstacles=args.obstacles,
+                        moving=args.moving)
     result = run_demo(config)
     print(result.table)
     print(f"episodes: {result.wall_s:.1f} s wall, {result.sim_s:.1f} s sim time; bag "

@@ -422,6 +422,12 @@ class GlobalPlanner(Node):
             waypoints = self.fd.plan(start, goal, generator=self.generator)
             ms = (time.perf_counter() - t0) * 1e3
         waypoints[0], waypoints[-1] = start, goal  # exact ends (the models work in float32)
+        if method == "sd":  # SD's waypoints in a wall move to the nearest free pose (ours)
+            from ecahd_core.navigation import snap_waypoints
+
+            waypoints, moved = snap_waypoints(self._fused_grid(), self.footprint, waypoints)
+            if moved:
+                detail += f", {moved} waypoint(s) moved out of collision"
         stamp = self.get_clock().now()
         self.runner.accept(waypoints, stamp.nanoseconds * 1e-9, hold=method == "fallback_astar")
         self._plan_pub.publish(xy_to_path(waypoints, self.params.global_frame, stamp.to_msg()))
@@ -436,12 +442,11 @@ class GlobalPlanner(Node):
     def _plan_fallback(self, start: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, float]:
         """A* with the footprint's clearance on the static map fused with the local costmap
         (a detour round a scanned blockage), from the nearest pose with clearance."""
-        from ecahd_core.astar import AStarPlanner, clearance_for_footprint, plan_from_pose
         from ecahd_core.controller import resample
+        from ecahd_core.navigation import detour
 
         t0 = time.perf_counter()
-        planner = AStarPlanner(self._fused_grid(), clearance_for_footprint(self.footprint))
-        path = resample(plan_from_pose(planner, start, goal), ASTAR_SPACING)
+        path = resample(detour(self._fused_grid(), self.footprint, start, goal), ASTAR_SPACING)
         self.fallbacks += 1
         self.get_logger().warning(
             f"replan after {self.runner.blocked_count} blocked segment(s): fallback to A* on "

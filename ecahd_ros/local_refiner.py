@@ -107,6 +107,8 @@ PARAMETERS = [
     ParamSpec("enable_stamped_cmd_vel", False, "publish geometry_msgs/TwistStamped on cmd_vel"),
     ParamSpec("use_scan", True, "fuse 'scan' into a rolling local costmap that J and the exact "
                                 "check read (obstacles not on the map)"),
+    ParamSpec("scan_in_plans", True, "the local costmap feeds J and the exact check (false: "
+                                     "scans reach only the collision monitor)"),
     ParamSpec("local_costmap_size", 6.0, "[m] side of the rolling local costmap window"),
     ParamSpec("obstacle_persistence", 2.0, "[s] a scanned obstacle not seen again for this long "
                                            "is forgotten; 0 = until a ray clears it"),
@@ -154,6 +156,7 @@ class LocalRefinerParams:
     plan_timeout: float
     enable_stamped_cmd_vel: bool
     use_scan: bool
+    scan_in_plans: bool
     local_costmap_size: float
     obstacle_persistence: float
     local_costmap_rate: float
@@ -412,7 +415,7 @@ class LocalRefiner(Node):
             pose = self.runner.pose
         self.world.add_scan(pose, scan)
         self.counters["scans"] += 1
-        if not self.world.stale:
+        if not (self.params.scan_in_plans and self.world.stale):
             return
         grid, costmap = self.world.fused()
         with self._lock:

@@ -15,7 +15,7 @@ START, GOAL = (1.5, 1.5), (2.5, 1.5)
 
 def test_short_demo_records_every_topic_and_eval_bag_scores_it(tmp_path):
     result = run_demo(DemoConfig(out=tmp_path / "demo", episodes=1, goals=(GOAL,), start=START,
-                                 max_steps=150, realtime_factor=4.0))
+                                 max_steps=300, realtime_factor=1.0))
     bag = read_bag(result.bag)
     for topic in DEFAULT_TOPICS:
         assert bag.get("/" + topic), f"no /{topic} messages in the bag"
@@ -24,7 +24,7 @@ def test_short_demo_records_every_topic_and_eval_bag_scores_it(tmp_path):
         assert path.is_file() and path.stat().st_size > 0
     episode = json.loads(result.json.read_text())["episodes"][0]
     assert episode["reached"] and episode["first_reach"] is not None
-    assert 0 < episode["control_steps"] <= 150
+    assert 0 < episode["control_steps"] <= 300
     assert episode["inference_time_s"] > 0
     # goal -> first plan latency, per episode, in the result and metrics.json
     assert len(result.goal_to_plan_ms) == 1 and 0 < result.goal_to_plan_ms[0] < 10_000
