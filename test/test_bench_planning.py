@@ -58,3 +58,15 @@ def test_safety_net_is_reported_beside_hd_and_leaves_its_numbers_alone():
     text = format_markdown(runs[True])
     assert "safety net" in text and "fallback %" in text
     assert "safety net" not in format_markdown(runs[False])
+
+
+def test_warm_fraction_reaches_hd_and_is_reported():
+    from ecahd_core.bench.planning import (PlanningBenchSettings, format_markdown,
+                                           run_planning_benchmark)
+
+    r = run_planning_benchmark(PlanningBenchSettings(
+        problems=1, robots=("quadruped",), methods=("hd",), ablation=False, safety_net=False,
+        warm_fraction=0.3), progress=False)
+    assert r.context["warm_fraction"] == 0.3 and len(r.cells) == 2
+    assert "warm-started at 0.3 of the schedule" in format_markdown(r)
+    assert PlanningBenchSettings().warm_fraction is None  # from noise unless asked
