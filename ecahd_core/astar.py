@@ -424,7 +424,14 @@ class CoarseAStarPlanner:
     Every vertex is thus the start, the goal or a traversable cell centre, and every segment is a
     fine 8-connected step or a segment with the exact clearance: what :class:`AStarPlanner`
     guarantees. What is lost is optimality: the chain is shortest for the representatives, not
-    for the fine grid (docs: a few per cent longer, measured in ``ecahd_core.dataset``).
+    for the fine grid. Measured against :class:`AStarPlanner` with 0.3 m blocks and clearance
+    0.4 m on generated maps (``ecahd map generate``, seed 1; pairs seeded (99, i)): a 30 x 15 m
+    depot at 0.05 m/cell, 50 pairs: 1.000x the length on average, at worst 1.02x; a 30 x 50 m
+    warehouse at 0.03 m/cell, 30 pairs: 1.004x, at worst 1.06x (another way round a shelf
+    block); a 60 x 60 m office at 0.03 m/cell, 12 pairs of 78 m on average: 1.000x, at worst
+    1.01x; every path collision-free by ``collision.check_collision``. CPU time per pair:
+    3 / 10 / 29 ms on that depot / warehouse / a 60 x 60 m office at 0.03 m/cell, against
+    40 / 420 / 6000 ms for :class:`AStarPlanner`.
 
     Attributes:
         fine: the :class:`AStarPlanner` whose mask, clearance and checks are used.

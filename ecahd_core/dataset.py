@@ -20,7 +20,7 @@ Because the sparse waypoints are evenly spaced by arc length, ``sparse_h{h}`` eq
 Two experts (``expert``): "exact" plans every pair with :class:`~ecahd_core.astar.AStarPlanner`
 on the fine grid, drawing the pairs one after the other from one random generator (the shipped
 maze2d-large data); "coarse" plans with :class:`~ecahd_core.astar.CoarseAStarPlanner` (same
-guarantees, paths a few tenths of a per cent longer) and draws attempt i from its own generator
+guarantees; paths 0.0-0.4 % longer on average, at worst 6 %, measured in its docstring) and draws attempt i from its own generator
 seeded (seed, i), both points in the largest region of the clearance-free space, so that the
 attempts can run in worker processes and the data do not depend on how many. "auto" (the
 default) is exact for maps of at most ``EXACT_MAX_CELLS`` cells and coarse above.
