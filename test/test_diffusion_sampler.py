@@ -93,6 +93,37 @@ def test_denoiser_handles_every_horizon_up_to_max(horizon):
         model(torch.randn(3, 11, 2), 5)
 
 
+def test_denoiser_inference_path_is_the_modules_bit_for_bit():
+    # without gradients in eval mode the encoder runs the fused layer kernel directly; the
+    # module path (what training and gradient calls use) gives the same bits
+    model = tiny_model()
+    x, t = torch.randn(4, 7, 2), torch.tensor([0, 30, 60, 99])
+    with torch.inference_mode():
+        fast = model(x, t)
+    module = TransformerDenoiser(model.config).eval()
+    module.load_state_dict(model.state_dict())
+    module._fast_encoder_args = lambda: None  # force the modules
+    with torch.no_grad():
+        assert torch.equal(module(x, t), fast)
+        assert torch.equal(model(x, t), fast)  # no_grad takes the fast path too
+    calls = []
+    handle = model.encoder.layers[1].register_forward_hook(lambda *a: calls.append(1))
+    with torch.inference_mode():
+        assert torch.equal(model(x, t), fast) and calls == [1]  # a hook: the modules run
+    handle.remove()
+    # new weights (assign=True replaces the tensors) and a new dtype drop the cached arguments
+    other = tiny_model()
+    with torch.no_grad():
+        for p in other.parameters():
+            p.add_(0.01)
+    model.load_state_dict(other.state_dict(), assign=True)
+    with torch.inference_mode():
+        assert torch.equal(model(x, t), other(x, t))
+    assert "_fast_args" in model.__dict__
+    model.float()  # .to() / .float() may replace the tensors: the cache goes
+    assert "_fast_args" not in model.__dict__
+
+
 def test_denoiser_config_is_validated_and_keyword_only():
     with pytest.raises(TypeError):
         DenoiserConfig(10)  # keyword-only
