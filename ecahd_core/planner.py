@@ -48,8 +48,8 @@ class SparseConfig:
             (:meth:`SparseDiffusion.replan`; HierarchicalPlanner's ``every_waypoint`` loop) starts
             from the rest of the previous plan, noised to the DDIM step where the last
             ``warm_fraction`` (0..1) of the schedule begins, and runs only those steps
-            (diffusion.sampler, "Warm start"). None: every plan samples from noise (Algorithm 1
-            as written). A goal's first plan always samples from noise.
+            (diffusion.sampler, "Warm start"). 0: off, every plan samples from noise (Algorithm
+            1 as written). A goal's first plan always samples from noise.
     """
 
     num_candidates: int = 10
@@ -62,12 +62,11 @@ class SparseConfig:
     guidance: bool = False
     guidance_weight: float = 1.0
     guidance_space: str = "eps"
-    warm_fraction: float | None = None
+    warm_fraction: float = 0.0
 
     def __post_init__(self) -> None:
-        if self.warm_fraction is not None and not 0.0 <= self.warm_fraction <= 1.0:
-            raise EcahdError(f"warm_fraction must lie in 0..1 (or None: off), "
-                             f"got {self.warm_fraction}")
+        if not 0.0 <= self.warm_fraction <= 1.0:
+            raise EcahdError(f"warm_fraction must lie in 0..1 (0: off), got {self.warm_fraction}")
         if self.selection not in SELECTION_RULES:
             raise EcahdError(f"selection rule {self.selection!r} is not one of "
                              f"{list(SELECTION_RULES)}")
@@ -162,10 +161,9 @@ class SparseDiffusion:
         horizon = horizon or cfg.horizon
         if warm_start is not None:
             warm_fraction = cfg.warm_fraction if warm_fraction is None else warm_fraction
-            if warm_fraction is None:
-                raise EcahdError("a warm start needs warm_fraction (here or in SparseConfig)")
-            if not 0.0 <= warm_fraction <= 1.0:
-                raise EcahdError(f"warm_fraction must lie in 0..1, got {warm_fraction}")
+            if not 0.0 < warm_fraction <= 1.0:
+                raise EcahdError(f"a warm start needs 0 < warm_fraction <= 1 (here or in "
+                                 f"SparseConfig; 0 is off), got {warm_fraction}")
             warm_start = np.asarray(warm_start, dtype=np.float32)
             if warm_start.shape != (horizon, 2):
                 raise EcahdError(f"warm_start must have shape ({horizon}, 2) [m], "
@@ -210,14 +208,14 @@ class SparseDiffusion:
         """Re-plan from ``start`` (2,) [m] to ``goal`` (2,) [m] while following ``previous``
         (P, 2) [m], the current plan (None: no plan yet).
 
-        With warm starts on (``config.warm_fraction`` not None) and ``previous`` at least
+        With warm starts on (``config.warm_fraction`` > 0) and ``previous`` at least
         ``horizon`` long, the candidates start from its last ``horizon`` waypoints with the
         first replaced by ``start`` (Algorithm 1's P^g - p remaining waypoints after reaching
         waypoint p; the whole plan after a timeout), see :meth:`plan`. Otherwise this is
         :meth:`plan` from noise, bit for bit."""
         horizon = horizon or self.config.horizon
         warm = None
-        if self.config.warm_fraction is not None and previous is not None and horizon > 2:
+        if self.config.warm_fraction > 0 and previous is not None and horizon > 2:
             previous = np.asarray(previous, dtype=np.float64).reshape(-1, 2)
             if len(previous) >= horizon:
                 warm = previous[len(previous) - horizon:].copy()

@@ -69,4 +69,4 @@ def test_warm_fraction_reaches_hd_and_is_reported():
         warm_fraction=0.3), progress=False)
     assert r.context["warm_fraction"] == 0.3 and len(r.cells) == 2
     assert "warm-started at 0.3 of the schedule" in format_markdown(r)
-    assert PlanningBenchSettings().warm_fraction is None  # from noise unless asked
+    assert PlanningBenchSettings().warm_fraction == 0.0  # from noise unless asked

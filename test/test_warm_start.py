@@ -168,7 +168,7 @@ def make_sd(shipped, warm_fraction):
 
 @pytest.mark.parametrize("fraction", [0.25, 0.5])
 def test_shipped_sd_warm_replan_is_finite_and_exact_at_both_ends(shipped, fraction):
-    cold = make_sd(shipped, None).plan(S, G, generator=torch.Generator().manual_seed(0))
+    cold = make_sd(shipped, 0.0).plan(S, G, generator=torch.Generator().manual_seed(0))
     here = cold.waypoints[1] + np.array([0.05, -0.04])  # the robot near waypoint 1
     sd = make_sd(shipped, fraction)
     plan = sd.replan(here, G, cold.waypoints, horizon=9, generator=torch.Generator().manual_seed(1))
@@ -183,7 +183,7 @@ def test_shipped_sd_warm_replan_is_finite_and_exact_at_both_ends(shipped, fracti
 
 
 def test_shipped_sd_replan_without_warm_start_is_plan_from_noise(shipped):
-    sd = make_sd(shipped, None)
+    sd = make_sd(shipped, 0.0)
     previous = sd.plan(S, G, generator=torch.Generator().manual_seed(0)).waypoints
     a = sd.replan(previous[1], G, previous, horizon=9, generator=torch.Generator().manual_seed(2))
     b = sd.plan(previous[1], G, horizon=9, generator=torch.Generator().manual_seed(2))
@@ -196,8 +196,8 @@ def test_shipped_sd_replan_without_warm_start_is_plan_from_noise(shipped):
     e = warm_sd.replan(previous[1], G, previous[:5], horizon=9,
                        generator=torch.Generator().manual_seed(2))
     assert np.array_equal(e.candidates, b.candidates)
-    with pytest.raises(EcahdError, match="warm_fraction"):
-        sd.plan(S, G, horizon=4, warm_start=previous[-4:])
+    with pytest.raises(EcahdError, match="0 is off"):
+        sd.plan(S, G, horizon=4, warm_start=previous[-4:])  # warm starts off
     with pytest.raises(EcahdError, match=r"\(4, 2\)"):
         warm_sd.plan(S, G, horizon=4, warm_start=previous)
     with pytest.raises(EcahdError, match="0..1"):

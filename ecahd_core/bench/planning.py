@@ -17,7 +17,7 @@ Metrics per cell:
 
 ``warm_fraction`` (``--warm-fraction``, ours): HD's every-waypoint re-plans start from the rest
 of the previous plan and run only that share of the DDIM schedule (``SparseConfig.warm_fraction``;
-None samples every re-plan from noise, Algorithm 1 as written). SD alone plans once per problem,
+0 samples every re-plan from noise, Algorithm 1 as written). SD alone plans once per problem,
 so it is unaffected.
 
 The safety net (ours, ``ecahd_core.safety``; ``safety_net``, default on) is judged beside the HD
@@ -85,7 +85,7 @@ class PlanningBenchSettings:
     polish_steps: int = 30  # DenseConfig's default; 0 = the paper's Algorithm 1
     keep_better: bool = True  # DenseConfig's default; False = the paper's Algorithm 1
     replan: str = "every_waypoint"
-    warm_fraction: float | None = None  # SparseConfig.warm_fraction: HD's warm-started re-plans
+    warm_fraction: float = 0.0  # SparseConfig.warm_fraction: HD's warm-started re-plans (0: off)
     ablation: bool = True
     safety_net: bool = True  # ours: judge HD / ECAHD with and without the net (ecahd_core.safety)
     net_retries: int = 2  # SafetyNetConfig's default
@@ -307,7 +307,7 @@ def format_markdown(r: PlanningBenchResult) -> str:
              f"keep the straight plan when DD is worse: {c.get('keep_better', False)}, "
              f"SD replanning {c['replan']}"
              + (f" warm-started at {c['warm_fraction']:g} of the schedule"
-                if c.get("warm_fraction") is not None and c["replan"] == "every_waypoint" else "")
+                if c.get("warm_fraction") and c["replan"] == "every_waypoint" else "")
              + ", "
              f"torch {c['torch']} with {c['threads']} thread(s). Each cell: ours / paper.", "",
              f"| metric | robot | {head} |", "|---|---|" + "---|" * len(cols)]

@@ -200,8 +200,7 @@ def _add_planning_arguments(parser: argparse.ArgumentParser) -> None:
                         help="HD: SD best-of-N at every waypoint (Algorithm 1) or once")
     parser.add_argument("--warm-fraction", type=float, default=d.warm_fraction, metavar="F",
                         help="HD every_waypoint: warm-start each re-plan from the previous plan, "
-                             "running the last F (0..1) of the DDIM schedule (default: from "
-                             "noise)")
+                             "running the last F (0..1) of the DDIM schedule (0: from noise)")
     parser.add_argument("--no-ablation", action="store_true", help="skip Table II")
     parser.add_argument("--json", metavar="FILE", help="one record per cell")
     parser.add_argument("--md", metavar="FILE", help="Table I / Table II as markdown")
