@@ -65,6 +65,9 @@ def run(args: argparse.Namespace) -> int:
     print(f"kept {dataset.num_pairs} pairs of {p['attempts']} drawn; rejected {rejected} "
           f"({100.0 * rejected / p['attempts']:.1f} %: {p['rejected_short']} shorter than "
           f"{p['min_distance']} m, {p['rejected_unreachable']} unreachable)")
+    if "max_spacing" in p:
+        print(f"{p['split_paths']} paths longer than {p['sparse_horizon'] - 1} x "
+              f"{p['max_spacing']} m were cut into pieces, one pair each")
     print(f"time {elapsed:.2f} s ({1e3 * elapsed / dataset.num_pairs:.2f} ms per kept pair)")
     print(f"wrote {out} ({size_mb:.2f} MB, sha256 {dataset.sha256[:16]})")
     return 0
