@@ -303,6 +303,20 @@ class LocalCostmap:
             mask[rs - r0:re - r0, cs - c0:ce - c0] &= ~self._known[rs:re, cs:ce]
         return mask
 
+    def is_known(self, xy) -> np.ndarray:
+        """(M,) bool: the world points (M, 2) [m] lie on or within the known margin of a static
+        obstacle (:meth:`for_map`); False off the map or without a static map."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        if self._known is None or len(xy) == 0:
+            return np.zeros(len(xy), dtype=bool)
+        col = np.floor((xy[:, 0] - self.lattice_origin[0]) / self.resolution).astype(np.int64)
+        row = np.floor((xy[:, 1] - self.lattice_origin[1]) / self.resolution).astype(np.int64)
+        H, W = self._known.shape
+        inside = (row >= 0) & (row < H) & (col >= 0) & (col < W)
+        out = np.zeros(len(xy), dtype=bool)
+        out[inside] = self._known[row[inside], col[inside]]
+        return out
+
     def points(self) -> np.ndarray:
         """(M, 2) world (x, y) [m] of the centres of the marked cells (e.g. for the
         collision monitor)."""

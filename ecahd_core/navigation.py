@@ -214,6 +214,8 @@ class GlobalRunner:
         xy = np.asarray(xy, dtype=np.float64).reshape(2)
         if not np.all(np.isfinite(xy)):
             raise PlanningError(f"robot position is not finite: {xy.tolist()}")
+        if now < self._last_request or now < self._last_plan:  # the clock jumped back (a
+            self._last_request = self._last_plan = -math.inf  # restarted simulator)
         if self._pending:
             if now - self._last_request < c.min_plan_interval:
                 return None  # coalesce a burst of goals: the latest is planned next time
@@ -246,6 +248,8 @@ class GlobalRunner:
         self.waypoints = np.asarray(waypoints, dtype=np.float64)
         self._pending = False
         self._last_plan = now
+        # goals that queued up while this plan was made are coalesced from its end on
+        self._last_request = max(self._last_request, now)
         self._hold = self._hold or hold
 
     def fail(self) -> None:

@@ -105,7 +105,8 @@ class LocalWorld:
         self.window = LocalCostmap.for_map(grid, config)
         self.offset = tuple(float(v) for v in offset)
         self.min_fuse_interval = min_fuse_interval
-        self.points = np.zeros((0, 2))  # (M, 2) [m] the latest scan's returns, world frame
+        self.points = np.zeros((0, 2))  # (M, 2) [m] the latest scan's returns that are not on
+        #   (or next to) the static map's obstacles, world frame: the collision monitor's input
         self.points_stamp: float | None = None
         self._fused = (grid, cost.costmap)
         self._dirty = False
@@ -119,7 +120,10 @@ class LocalWorld:
                            angle_increment=scan.angle_increment, range_min=scan.range_min,
                            range_max=scan.range_max, stamp=scan.stamp,
                            sensor_offset=self.offset)
-        self.points = scan_points(pose, scan, self.offset)
+        points = scan_points(pose, scan, self.offset)
+        # returns from the static map's obstacles are known: the planner and the exact checker
+        # keep the footprint off them; the collision monitor guards against the rest
+        self.points = points[~self.window.is_known(points)]
         self.points_stamp = scan.stamp
         mask = self.window.obstacle_mask()
         if before.shape != mask.shape or not np.array_equal(before, mask) \

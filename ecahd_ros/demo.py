@@ -236,18 +236,23 @@ def _scenarios(config: DemoConfig, start, goals) -> list[Path] | None:
         return None
     from ecahd_core.footprint import make_footprint
     from ecahd_core.maps import load_map
-    from ecahd_core.scenario import generate_scenario, write_scenario
+    from ecahd_core.scenario import ScenarioError, generate_scenario, write_scenario
 
     grid, footprint = load_map(config.map), make_footprint(config.robot)
     folder = config.out / "scenarios"
     folder.mkdir(parents=True, exist_ok=True)
     files, previous = [], start
     for i, goal in enumerate(goals):
-        scenario = generate_scenario(grid, footprint, [previous, goal],
-                                     static=config.obstacles, moving=config.moving,
-                                     seed=config.seed * 1000 + i)
-        files.append(write_scenario(folder / f"episode_{i}.yaml", scenario.obstacles))
-        log.info("episode %d: obstacles %s", i, ", ".join(scenario.kinds))
+        try:
+            scenario = generate_scenario(grid, footprint, [previous, goal],
+                                         static=config.obstacles, moving=config.moving,
+                                         seed=config.seed * 1000 + i)
+            obstacles = scenario.obstacles
+            log.info("episode %d: obstacles %s", i, ", ".join(scenario.kinds))
+        except ScenarioError as exc:  # e.g. a leg too short to hold them: none this episode
+            obstacles = ()
+            log.warning("episode %d: no obstacles (%s)", i, exc)
+        files.append(write_scenario(folder / f"episode_{i}.yaml", obstacles))
         previous = goal
     return files
 

@@ -117,7 +117,8 @@ PARAMETERS = [
     ParamSpec("scan_offset_y", 0.0, "[m] the scanner's y on base_link"),
     ParamSpec("scan_offset_yaw", 0.0, "[rad] the scanner's yaw on base_link"),
     ParamSpec("collision_monitor", True, "stop / slow down any cmd_vel whose footprint, swept "
-                                         "over monitor_time_to_collision, hits a scan point"),
+                                         "over monitor_time_to_collision, hits a scan point "
+                                         "that is not on the static map"),
     ParamSpec("monitor_time_to_collision", 1.0, "[s] horizon of the collision monitor"),
     ParamSpec("monitor_stop_margin", 0.02, "[m] footprint growth that stops the robot"),
     ParamSpec("monitor_slowdown_margin", 0.3, "[m] footprint growth that slows the robot down"),

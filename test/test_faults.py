@@ -305,9 +305,6 @@ class TestProcessGraph:
         g.spin_until(lambda: g.log_count("global_planner", "map 'maze2d-large' received") == 2,
                      "the planner hears the new simulator")
 
-    @pytest.mark.xfail(strict=True, reason="GlobalRunner coalesces goals by sim time: after "
-                       "the sim clock restarts at 0, now - _last_request < 0 holds every goal "
-                       "back until sim time catches up (ecahd_core/navigation.py)")
     def test_a_goal_after_a_simulator_restart_is_planned(self, graph):
         g = graph
         if not g.odom_before_restart[5] - g.odom[5] > 10.0:
@@ -704,10 +701,6 @@ def test_malformed_input_to_planner_and_refiner(ros_context, capfd, tmp_path):
 SLOW_PLAN = 0.15  # [s] added to every SD plan
 
 
-@pytest.mark.xfail(strict=True, reason="global_planner plans each queued goal in its own "
-                   "callback: a goal superseded while a plan ran is still planned when its "
-                   "turn comes (GlobalRunner coalesces by the time since the last request, not "
-                   "by newer goals waiting), so a burst costs up to the queue depth (10) plans")
 def test_a_burst_of_goals_is_coalesced(ros_context):
     """global_planner (wall time, SD made SLOW_PLAN s slower) spun as spin_node spins it; 40
     goals in 0.4 s arrive while its first plan runs: it plans the first and then the last
