@@ -24,6 +24,22 @@ Metrics (D4RL maze2d-large-v1 conventions, as the paper uses them):
 Beyond Table III: the wall time of the local refiner's control callback ("control" timing
 records, one per tick, a J check + DD started in the tick included, hence not inference time),
 as its median and 99th percentile over an episode's ticks and over all ticks of a run.
+
+Beyond Table III, for maps that do not know every obstacle (issues 9 and 11):
+
+- Contact steps by kind: the simulator's ``collision_detail`` records (one per contact step,
+  "wall" | "static_obstacle" | "moving_obstacle"), counted per kind; None when the recording
+  has no ``collision_detail`` topic (older bags), 0 when it has one without contacts.
+- Monitor stops / slowdowns: control ticks whose cmd_vel the collision monitor stopped or
+  slowed ("monitor" of the "control" record); blocked ticks: control ticks with reason
+  "blocked" (the local plan is in collision; the robot waits for a new global plan).
+- Global plans: the global planner's records ("sd", "astar", "fd", "fallback_astar"): the
+  first plan of the goal and every replan (SD replans at each waypoint); fallbacks: the
+  "fallback_astar" ones (A* round a blockage after repeated blocked replans).
+- Time to goal: first reach x the control period [s of sim time]; None if never reached.
+- cmd_vel jitter: the intervals between consecutive control ticks' ``wall`` stamps
+  (time.time() when the tick published its cmd_vel) [ms], their p50 / p99, and the p99 of
+  |interval - nominal|, nominal the median interval (or the control period given) [ms].
 """
 from __future__ import annotations
 
@@ -41,6 +57,9 @@ MAX_STEPS = 800  # control steps per episode in maze2d-large-v1
 CONTROL_PERIOD = 0.1  # [s of sim time] one Table III step (D4RL maze2d: 800 steps per episode)
 _STILL = 1e-6  # [m] odometry samples closer than this to the previous one are dropped
 CONTROL_STAGE = "control"  # timing stage of a control tick: latency, not inference time
+PLAN_STAGES = ("sd", "astar", "fd", "fallback_astar")  # one global plan each
+FALLBACK_STAGE = "fallback_astar"  # A* round a blockage after repeated blocked replans
+CONTACT_KINDS = ("wall", "static_obstacle", "moving_obstacle")  # collision_detail "kind"
 
 
 @dataclass(frozen=True)
@@ -75,6 +94,13 @@ class EpisodeData:
         timing_stages: (T,) stage names ("sd", "astar", "fd", "j_check", "dd", "control").
         cmd_vel_count: cmd_vel messages in the episode (informative; steps come from odom).
         start_time: [s] the episode's start on the recording's clock (informative).
+        contact_kinds: the kind of every contact step ("wall", "static_obstacle",
+            "moving_obstacle"; ``collision_detail``); None: not recorded.
+        control_reasons: (C,) each control tick's reason ("follow", "blocked", ...).
+        control_monitor: (C,) each control tick's collision monitor action ("none",
+            "slowdown", "stop").
+        control_wall: (C,) [s, wall clock] when each control tick published its cmd_vel (NaN:
+            not recorded).
     """
 
     goal: np.ndarray
@@ -84,6 +110,10 @@ class EpisodeData:
     timing_stages: list[str] = field(default_factory=list)
     cmd_vel_count: int = 0
     start_time: float = 0.0
+    contact_kinds: list[str] | None = None
+    control_reasons: list[str] = field(default_factory=list)
+    control_monitor: list[str] = field(default_factory=list)
+    control_wall: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 @dataclass(frozen=True)
@@ -111,6 +141,19 @@ class EpisodeMetrics:
     control_ticks: int = 0  # "control" timing records
     control_ms_p50: float | None = None  # [ms] wall time of the control callback
     control_ms_p99: float | None = None
+    contact_steps_wall: int | None = None  # contact steps by kind; None: no collision_detail
+    contact_steps_static: int | None = None
+    contact_steps_moving: int | None = None
+    monitor_stops: int = 0  # control ticks the collision monitor stopped
+    monitor_slowdowns: int = 0
+    blocked_ticks: int = 0  # control ticks with reason "blocked"
+    global_plans: int = 0  # sd / astar / fd / fallback_astar records: first plan + replans
+    fallbacks: int = 0  # fallback_astar records
+    time_to_goal_s: float | None = None  # [s of sim time] first_reach * period
+    cmd_interval_ms_p50: float | None = None  # [ms] between consecutive control ticks (wall)
+    cmd_interval_ms_p99: float | None = None
+    cmd_jitter_ms_p99: float | None = None  # [ms] p99 of |interval - nominal|
+    cmd_interval_nominal_ms: float | None = None  # [ms] the nominal interval used
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -129,6 +172,18 @@ class Summary:
     path_collision_free: float | None  # fraction judged collision free by the exact checker
     control_ms_p50: float | None = None  # [ms] over all control ticks of the episodes
     control_ms_p99: float | None = None
+    wall_contact_episodes: int | None = None  # episodes with >= 1 contact of the kind; None:
+    static_contact_episodes: int | None = None  # no episode recorded collision_detail
+    moving_contact_episodes: int | None = None
+    monitor_stops: float = 0.0  # means per episode
+    monitor_slowdowns: float = 0.0
+    blocked_ticks: float = 0.0
+    global_plans: float = 0.0
+    fallbacks: float = 0.0
+    time_to_goal_s: float | None = None  # [s of sim time] over the reaching episodes
+    cmd_interval_ms_p50: float | None = None  # [ms] pooled over all episodes' intervals
+    cmd_interval_ms_p99: float | None = None
+    cmd_jitter_ms_p99: float | None = None
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -153,10 +208,11 @@ def states_at_control_steps(odom: np.ndarray, *, period: float = CONTROL_PERIOD,
 
 def evaluate_episode(data: EpisodeData, *, index: int = 0, grid: GridMap | None = None,
                      footprint: Footprint | None = None, goal_radius: float = GOAL_RADIUS,
-                     max_steps: int = MAX_STEPS,
-                     period: float = CONTROL_PERIOD) -> EpisodeMetrics:
+                     max_steps: int = MAX_STEPS, period: float = CONTROL_PERIOD,
+                     nominal_interval_ms: float | None = None) -> EpisodeMetrics:
     """Table III metrics of one episode; the exact path check runs when grid and footprint are
-    given. Raises TrajectoryError for a malformed goal or odometry."""
+    given. nominal_interval_ms: [ms] the cmd_vel period the jitter is measured against (None:
+    the median interval). Raises TrajectoryError for a malformed goal or odometry."""
     goal = np.asarray(data.goal, dtype=np.float64).reshape(-1)
     if goal.shape != (2,) or not np.all(np.isfinite(goal)):
         raise TrajectoryError(f"episode goal must be a finite (2,) point, got {data.goal!r}")
@@ -182,10 +238,13 @@ def evaluate_episode(data: EpisodeData, *, index: int = 0, grid: GridMap | None 
         keep = np.concatenate([[True], np.linalg.norm(np.diff(xy, axis=0), axis=1) > _STILL])
         report = check_collision(xy[keep], footprint, grid, headings=odom[keep, 3])
         free, penetration = report.collision_free, report.penetration_fraction
+    kinds = None if data.contact_kinds is None else list(data.contact_kinds)
+    stats = interval_stats(cmd_intervals(data), nominal_interval_ms)
+    first_reach = int(hits[0]) + 1 if hits.size else None
     return EpisodeMetrics(
         index=index, goal=(float(goal[0]), float(goal[1])),
         episode_reward=int(within.sum()),
-        first_reach=int(hits[0]) + 1 if hits.size else None,
+        first_reach=first_reach,
         collision_rate=100.0 * float(collisions.mean()) if collisions.size else 0.0,
         inference_time_s=float(timing.sum()) / 1000.0,
         reached=bool(hits.size),
@@ -198,7 +257,18 @@ def evaluate_episode(data: EpisodeData, *, index: int = 0, grid: GridMap | None 
         cmd_vel_count=int(data.cmd_vel_count),
         dd_calls=sum(1 for s in data.timing_stages if s == "dd"),
         stage_ms=stage_ms, control_ticks=len(control),
-        control_ms_p50=_percentile(control, 50), control_ms_p99=_percentile(control, 99))
+        control_ms_p50=_percentile(control, 50), control_ms_p99=_percentile(control, 99),
+        contact_steps_wall=None if kinds is None else kinds.count("wall"),
+        contact_steps_static=None if kinds is None else kinds.count("static_obstacle"),
+        contact_steps_moving=None if kinds is None else kinds.count("moving_obstacle"),
+        monitor_stops=list(data.control_monitor).count("stop"),
+        monitor_slowdowns=list(data.control_monitor).count("slowdown"),
+        blocked_ticks=list(data.control_reasons).count("blocked"),
+        global_plans=sum(1 for s in data.timing_stages if s in PLAN_STAGES),
+        fallbacks=sum(1 for s in data.timing_stages if s == FALLBACK_STAGE),
+        time_to_goal_s=None if first_reach is None else first_reach * period,
+        cmd_interval_ms_p50=stats.p50, cmd_interval_ms_p99=stats.p99,
+        cmd_jitter_ms_p99=stats.jitter_p99, cmd_interval_nominal_ms=stats.nominal)
 
 
 def _control_mask(data: EpisodeData) -> np.ndarray:
@@ -214,21 +284,68 @@ def control_times(data: EpisodeData) -> np.ndarray:
     return np.asarray(data.timing_ms, dtype=np.float64).reshape(-1)[_control_mask(data)]
 
 
+def cmd_intervals(data: EpisodeData) -> np.ndarray:
+    """(C - 1,) [ms] the wall-clock intervals between consecutive control ticks' cmd_vel
+    publishes (ticks without a ``wall`` stamp are left out)."""
+    wall = np.asarray(data.control_wall, dtype=np.float64).reshape(-1)
+    wall = wall[np.isfinite(wall)]
+    return np.diff(wall) * 1e3
+
+
+@dataclass(frozen=True)
+class IntervalStats:
+    """Inter-publish intervals [ms]: p50, p99, and the p99 of |interval - nominal|."""
+
+    p50: float | None
+    p99: float | None
+    jitter_p99: float | None
+    nominal: float | None  # the nominal interval the jitter is measured against
+
+
+def interval_stats(intervals_ms, nominal_ms: float | None = None) -> IntervalStats:
+    """p50 / p99 of the intervals [ms] and the p99 of their deviation from nominal_ms (None:
+    their median); all None without intervals."""
+    d = np.asarray(intervals_ms, dtype=np.float64).reshape(-1)
+    if d.size == 0:
+        return IntervalStats(None, None, None, nominal_ms)
+    nominal = float(np.median(d)) if nominal_ms is None else float(nominal_ms)
+    return IntervalStats(_percentile(d, 50), _percentile(d, 99),
+                         _percentile(np.abs(d - nominal), 99), nominal)
+
+
 def _percentile(values: np.ndarray, q: float) -> float | None:
     return float(np.percentile(values, q)) if len(values) else None
 
 
-def summarize(metrics: list[EpisodeMetrics], *, control_ms=None) -> Summary:
-    """Means over the episodes (all NaN-free; first_reach over reaching episodes only).
-    control_ms: (C,) [ms] the control ticks of all episodes (:func:`control_times`), pooled
-    for the p50 / p99 (None: not reported)."""
+def _episodes_with(metrics: list[EpisodeMetrics], attribute: str) -> int | None:
+    """How many episodes have a contact of one kind; None when none recorded the kinds."""
+    counts = [getattr(m, attribute) for m in metrics if getattr(m, attribute) is not None]
+    return sum(1 for c in counts if c > 0) if counts else None
+
+
+def summarize(metrics: list[EpisodeMetrics], *, control_ms=None, intervals_ms=None,
+              nominal_interval_ms: float | None = None) -> Summary:
+    """Means over the episodes (all NaN-free; first_reach and time_to_goal_s over reaching
+    episodes only). control_ms: (C,) [ms] the control ticks of all episodes
+    (:func:`control_times`), pooled for the p50 / p99 (None: not reported). intervals_ms: the
+    cmd_vel intervals of all episodes (:func:`cmd_intervals`), pooled for the interval p50 /
+    p99 and the jitter p99 against nominal_interval_ms (None: their median)."""
     control = np.asarray(control_ms if control_ms is not None else [], dtype=np.float64)
     p50, p99 = _percentile(control, 50), _percentile(control, 99)
+    stats = interval_stats(intervals_ms if intervals_ms is not None else [],
+                           nominal_interval_ms)
+    pooled = dict(cmd_interval_ms_p50=stats.p50, cmd_interval_ms_p99=stats.p99,
+                  cmd_jitter_ms_p99=stats.jitter_p99)
     n = len(metrics)
     if n == 0:
-        return Summary(0, 0.0, None, 0.0, 0.0, 0.0, None, p50, p99)
+        return Summary(0, 0.0, None, 0.0, 0.0, 0.0, None, p50, p99, **pooled)
     reach = [m.first_reach for m in metrics if m.first_reach is not None]
+    to_goal = [m.time_to_goal_s for m in metrics if m.time_to_goal_s is not None]
     checked = [m.path_collision_free for m in metrics if m.path_collision_free is not None]
+
+    def mean(attribute: str) -> float:
+        return float(np.mean([getattr(m, attribute) for m in metrics]))
+
     return Summary(
         episodes=n,
         episode_reward=float(np.mean([m.episode_reward for m in metrics])),
@@ -237,7 +354,14 @@ def summarize(metrics: list[EpisodeMetrics], *, control_ms=None) -> Summary:
         inference_time_s=float(np.mean([m.inference_time_s for m in metrics])),
         reached=float(np.mean([m.reached for m in metrics])),
         path_collision_free=float(np.mean(checked)) if checked else None,
-        control_ms_p50=p50, control_ms_p99=p99)
+        control_ms_p50=p50, control_ms_p99=p99,
+        wall_contact_episodes=_episodes_with(metrics, "contact_steps_wall"),
+        static_contact_episodes=_episodes_with(metrics, "contact_steps_static"),
+        moving_contact_episodes=_episodes_with(metrics, "contact_steps_moving"),
+        monitor_stops=mean("monitor_stops"), monitor_slowdowns=mean("monitor_slowdowns"),
+        blocked_ticks=mean("blocked_ticks"), global_plans=mean("global_plans"),
+        fallbacks=mean("fallbacks"), time_to_goal_s=float(np.mean(to_goal)) if to_goal else None,
+        **pooled)
 
 
 # ---------------------------------------------------------------------------- splitting
@@ -250,16 +374,21 @@ def episode_index(goal_times, times) -> np.ndarray:
     return np.searchsorted(goal_times, np.asarray(times, dtype=np.float64), side="right") - 1
 
 
-def split_episodes(goals, odom, *, collisions=None, timing=None,
-                   cmd_vel_times=None) -> list[EpisodeData]:
+def split_episodes(goals, odom, *, collisions=None, timing=None, cmd_vel_times=None,
+                   contacts=None) -> list[EpisodeData]:
     """Cut a recording into episodes at its goals.
 
     Args:
         goals: (G, 3) receive time [s], x, y [m] of each goal, in time order.
         odom: (N, 5) receive time [s], stamp [s of sim time], x, y, yaw.
         collisions: (M, 2) receive time [s], flag (0/1).
-        timing: list of (receive time [s], ms, stage).
+        timing: list of (receive time [s], ms, stage) or (receive time [s], ms, stage, record),
+            record the whole ``ecahd/timing`` JSON dict: a "control" record's "reason",
+            "monitor" and "wall" fill the episode's control_* lists ("", "none", NaN when
+            absent).
         cmd_vel_times: (C,) receive times [s].
+        contacts: list of (receive time [s], kind) from ``collision_detail``; None: the
+            recording has none (the episodes' contact_kinds stay None).
     All receive times are on the one clock of the recording; data before the first goal is
     dropped.
     """
@@ -272,18 +401,34 @@ def split_episodes(goals, odom, *, collisions=None, timing=None,
     g = goals[:, 0]
     o_ep = episode_index(g, odom[:, 0])
     c_ep = episode_index(g, collisions[:, 0])
-    t_ep = episode_index(g, [t for t, _, _ in timing])
+    t_ep = episode_index(g, [entry[0] for entry in timing])
     v_ep = episode_index(g, cmd_t)
+    k_ep = episode_index(g, [t for t, _ in contacts]) if contacts is not None else None
     episodes = []
     for i, (t0, x, y) in enumerate(goals):
-        ours = [k for k, e in enumerate(t_ep) if e == i]
+        ours = [timing[k] for k, e in enumerate(t_ep) if e == i]
+        ticks = [entry[3] if len(entry) > 3 else {} for entry in ours
+                 if entry[2] == CONTROL_STAGE]
         episodes.append(EpisodeData(
             goal=np.array([x, y]), odom=odom[o_ep == i, 1:5],
             collisions=collisions[c_ep == i, 1] > 0.5,
-            timing_ms=np.array([timing[k][1] for k in ours], dtype=np.float64),
-            timing_stages=[str(timing[k][2]) for k in ours],
-            cmd_vel_count=int(np.sum(v_ep == i)), start_time=float(t0)))
+            timing_ms=np.array([entry[1] for entry in ours], dtype=np.float64),
+            timing_stages=[str(entry[2]) for entry in ours],
+            cmd_vel_count=int(np.sum(v_ep == i)), start_time=float(t0),
+            contact_kinds=(None if contacts is None else
+                           [str(contacts[k][1]) for k, e in enumerate(k_ep) if e == i]),
+            control_reasons=[str(r.get("reason", "")) for r in ticks],
+            control_monitor=[str(r.get("monitor", "none")) for r in ticks],
+            control_wall=np.array([_float_or_nan(r.get("wall")) for r in ticks],
+                                  dtype=np.float64)))
     return episodes
+
+
+def _float_or_nan(value) -> float:
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return float("nan")
 
 
 # ------------------------------------------------------------------------------- tables
@@ -316,4 +461,33 @@ def markdown_table(summary: Summary, metrics: list[EpisodeMetrics], *,
                      f"{m.inference_time_s:.3f} | {'yes' if m.reached else 'no'} | "
                      f"{m.control_steps} | {m.dd_calls} | {_fmt(m.control_ms_p50, 2)} / "
                      f"{_fmt(m.control_ms_p99, 2)} |")
+    lines += ["", _safety_paragraph(summary), "",
+              "| Episode | Contact steps wall / static / moving | Monitor stops / slowdowns "
+              "| Blocked ticks | Global plans | Fallbacks | Time to goal [s] "
+              "| cmd_vel interval p50 / p99 [ms] | Jitter p99 [ms] |",
+              "|---:|---|---|---:|---:|---:|---:|---:|---:|"]
+    for m in metrics:
+        contacts = " / ".join(_fmt(c, 0) for c in (m.contact_steps_wall,
+                                                   m.contact_steps_static,
+                                                   m.contact_steps_moving))
+        lines.append(f"| {m.index} | {contacts} | {m.monitor_stops} / {m.monitor_slowdowns} | "
+                     f"{m.blocked_ticks} | {m.global_plans} | {m.fallbacks} | "
+                     f"{_fmt(m.time_to_goal_s, 1)} | {_fmt(m.cmd_interval_ms_p50, 2)} / "
+                     f"{_fmt(m.cmd_interval_ms_p99, 2)} | {_fmt(m.cmd_jitter_ms_p99, 2)} |")
     return "\n".join(lines) + "\n"
+
+
+def _safety_paragraph(s: Summary) -> str:
+    """The run's obstacle contacts, monitor, replanning and cmd_vel timing in one paragraph."""
+    kinds = (s.wall_contact_episodes, s.static_contact_episodes, s.moving_contact_episodes)
+    contacts = ("contact kinds not recorded (no collision_detail)" if all(k is None for k in kinds)
+                else "episodes with a wall / static-obstacle / moving-obstacle contact: "
+                     + " / ".join(_fmt(k, 0) for k in kinds) + f" of {s.episodes}")
+    return (f"Obstacles and replanning: {contacts}; per episode, means: "
+            f"{s.monitor_stops:.1f} collision monitor stops, {s.monitor_slowdowns:.1f} "
+            f"slowdowns, {s.blocked_ticks:.1f} blocked control ticks, {s.global_plans:.1f} "
+            f"global plans (first + replans), {s.fallbacks:.1f} A* fallbacks; time to goal "
+            f"{_fmt(s.time_to_goal_s, 1)} s of sim time (reaching episodes). cmd_vel "
+            f"inter-publish interval (wall clock) p50 {_fmt(s.cmd_interval_ms_p50, 2)} ms, p99 "
+            f"{_fmt(s.cmd_interval_ms_p99, 2)} ms; jitter (|interval - nominal|) p99 "
+            f"{_fmt(s.cmd_jitter_ms_p99, 2)} ms.")

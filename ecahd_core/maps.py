@@ -387,6 +387,31 @@ def from_occupancy_grid(data, width: int, height: int, resolution: float,
                    occupied_threshold=occupied_threshold)
 
 
+def grid_from_occupancy_message(msg, *, unknown_is_occupied: bool = True,
+                                name: str = "occupancy_grid") -> GridMap:
+    """A nav_msgs/OccupancyGrid read by its field names (an rclpy message or the rosbags
+    dataclass a bag deserialises to; no ROS import here) -> GridMap; raises MapError for a
+    malformed or rotated grid (a non-finite or zero origin quaternion included).
+
+    The message carries the resolution as float32 (0.1 arrives as 0.10000000149); it is restored
+    to the shortest decimal that float32 value stands for, so a map keeps its fingerprint (and
+    the models trained for it still load) after a trip through a message or a bag."""
+    q = msg.info.origin.orientation
+    quaternion = (q.x, q.y, q.z, q.w)
+    if not all(math.isfinite(v) for v in quaternion):
+        raise MapError(f"OccupancyGrid origin orientation is not finite: {quaternion}")
+    if abs(q.w) < 1e-6 and max(abs(q.x), abs(q.y), abs(q.z)) < 1e-6:
+        raise MapError("OccupancyGrid origin orientation is the zero quaternion")
+    if max(abs(q.x), abs(q.y), abs(q.z)) > 1e-6 * max(1.0, abs(q.w)):
+        raise MapError("OccupancyGrid with a rotated origin is not supported")
+    resolution = float(str(np.float32(msg.info.resolution)))  # float32 -> shortest decimal
+    return from_occupancy_grid(np.asarray(msg.data, dtype=np.int16), msg.info.width,
+                               msg.info.height, resolution,
+                               (msg.info.origin.position.x, msg.info.origin.position.y),
+                               frame_id=msg.header.frame_id or "map", name=name,
+                               unknown_is_occupied=unknown_is_occupied)
+
+
 # ------------------------------------------------------------------------ distance fields
 def signed_distance(grid: GridMap) -> np.ndarray:
     """Signed distance [m] from each cell centre to the nearest obstacle boundary.

@@ -19,13 +19,15 @@ metadata.yaml written) by :meth:`BagRecorder.close`, which ``destroy_node`` call
 Parameters (read-only):
     output (str, ""): bag directory to create; it must not exist. Empty: rosbag2_<date>-<time>
         in the working directory, as ``ros2 bag record`` names it.
-    topics (str[], map goal_pose odom plan local_plan cmd_vel collision ecahd/timing): topics to
-        record, relative names resolved in the node's namespace.
+    topics (str[], map goal_pose odom plan local_plan cmd_vel collision collision_detail
+        ecahd/timing ecahd/replan local_costmap scan): topics to record, relative names resolved
+        in the node's namespace.
     latched_topics (str[], [map]): topics to subscribe transient_local.
     storage (str, "mcap"): rosbag2 storage plugin, mcap or sqlite3.
     discovery_period (double, 0.5): [s, wall time] how often unadvertised topics are looked up.
 
-``read_bag(path)`` reads a bag back as {topic: [(t_ns, message), ...]}.
+``read_bag(path)`` (``ecahd_core.bag_io``, re-exported here) reads a bag back as
+{topic: [(t_ns, message), ...]} without rclpy.
 """
 from __future__ import annotations
 
@@ -43,17 +45,17 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness, QosReliability,
                                 QosTime)
 from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
-from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys import get_typestore
 
+from ecahd_core.bag_io import TYPESTORE, read_bag  # noqa: F401 (read_bag: re-exported here)
 from ecahd_core.errors import EcahdError, BagError
 from ecahd_ros.params import ParamSpec, declare_parameters
 from ecahd_ros.spin import spin_node
 
 BAG_VERSION = 9  # rosbag2 metadata version of Jazzy (offered_qos_profiles as a list)
-TYPESTORE = Stores.ROS2_JAZZY
 STORAGES = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
 DEFAULT_TOPICS = ["map", "goal_pose", "odom", "plan", "local_plan", "cmd_vel", "collision",
-                  "ecahd/timing"]
+                  "collision_detail", "ecahd/timing", "ecahd/replan", "local_costmap", "scan"]
 
 # one place for every parameter of the node
 PARAMETERS = [
@@ -266,30 +268,6 @@ class BagRecorder(Node):
     def destroy_node(self) -> None:
         self.close()
         super().destroy_node()
-
-
-# -------------------------------------------------------------------------------- reading
-def read_bag(path, topics=None) -> dict[str, list[tuple[int, object]]]:
-    """Read a rosbag2 bag (MCAP or SQLite3) -> {topic: [(receive time [ns], message), ...]} in
-    time order, every recorded topic present (maybe with an empty list). Messages are rosbags
-    dataclasses with the ROS field names, deserialised with the definitions stored in the bag,
-    or the ROS 2 Jazzy typestore for a bag without any. topics: names to keep (default all)."""
-    from rosbags.highlevel import AnyReader, AnyReaderError
-
-    path = Path(path)
-    if not (path / "metadata.yaml").is_file():
-        raise BagError(f"{str(path)!r} is not a rosbag2 directory (no metadata.yaml)")
-    try:
-        with AnyReader([path], default_typestore=get_typestore(TYPESTORE)) as reader:
-            connections = [c for c in reader.connections if topics is None or c.topic in topics]
-            out: dict[str, list[tuple[int, object]]] = {c.topic: [] for c in connections}
-            if not connections:  # rosbags reads every connection when given none
-                return out
-            for conn, t_ns, raw in reader.messages(connections=connections):
-                out[conn.topic].append((int(t_ns), reader.deserialize(raw, conn.msgtype)))
-    except AnyReaderError as exc:
-        raise BagError(f"cannot read bag {str(path)!r}: {exc}") from exc
-    return out
 
 
 def main(args=None) -> None:

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import json
-import math
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -10,8 +9,7 @@ from geometry_msgs.msg import Pose, PoseStamped
 from nav_msgs.msg import OccupancyGrid, Path
 from std_msgs.msg import String
 
-from ecahd_core.errors import MapError
-from ecahd_core.maps import GridMap, from_occupancy_grid, to_occupancy_grid
+from ecahd_core.maps import GridMap, grid_from_occupancy_message, to_occupancy_grid
 
 
 def grid_to_msg(grid: GridMap, stamp: Time | None = None) -> OccupancyGrid:
@@ -38,26 +36,10 @@ def layout_to_msg(layout, stamp: Time | None = None) -> OccupancyGrid:
 
 def msg_to_grid(msg: OccupancyGrid, *, unknown_is_occupied: bool = True,
                 name: str = "occupancy_grid") -> GridMap:
-    """nav_msgs/OccupancyGrid -> GridMap; raises MapError for a malformed or rotated grid
-    (a non-finite or zero origin quaternion included).
-
-    The message carries the resolution as float32 (0.1 arrives as 0.10000000149); it is restored
-    to the shortest decimal that float32 value stands for, so a map keeps its fingerprint (and
-    the models trained for it still load) after a trip through a message."""
-    q = msg.info.origin.orientation
-    quaternion = (q.x, q.y, q.z, q.w)
-    if not all(math.isfinite(v) for v in quaternion):
-        raise MapError(f"OccupancyGrid origin orientation is not finite: {quaternion}")
-    if abs(q.w) < 1e-6 and max(abs(q.x), abs(q.y), abs(q.z)) < 1e-6:
-        raise MapError("OccupancyGrid origin orientation is the zero quaternion")
-    if max(abs(q.x), abs(q.y), abs(q.z)) > 1e-6 * max(1.0, abs(q.w)):
-        raise MapError("OccupancyGrid with a rotated origin is not supported")
-    resolution = float(str(np.float32(msg.info.resolution)))
-    return from_occupancy_grid(np.asarray(msg.data, dtype=np.int16), msg.info.width,
-                               msg.info.height, resolution,
-                               (msg.info.origin.position.x, msg.info.origin.position.y),
-                               frame_id=msg.header.frame_id or "map", name=name,
-                               unknown_is_occupied=unknown_is_occupied)
+    """nav_msgs/OccupancyGrid -> GridMap; raises MapError for a malformed or rotated grid.
+    The float32 resolution is restored (0.1 stays 0.1): the rule lives in
+    :func:`ecahd_core.maps.grid_from_occupancy_message`, which ``ecahd eval-bag`` uses too."""
+    return grid_from_occupancy_message(msg, unknown_is_occupied=unknown_is_occupied, name=name)
 
 
 def xy_to_path(xy: np.ndarray, frame_id: str, stamp: Time | None = None) -> Path:

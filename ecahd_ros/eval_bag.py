@@ -11,6 +11,15 @@ the local refiner's "control" records (the wall time of each control tick) are r
 as their median and 99th percentile (``control_ms_p50``, ``control_ms_p99``; per episode and
 pooled over the run in the means).
 
+From the same records and ``collision_detail`` (``ecahd_core.evaluation`` defines each):
+contact steps by kind (wall / static obstacle / moving obstacle), collision monitor stops and
+slowdowns, blocked control ticks, global plans and A* fallbacks, time to goal, and the cmd_vel
+inter-publish interval and jitter from the control records' ``wall`` stamps. A bag without
+these (recorded before them) still evaluates: the counts are 0, the kinds and jitter None.
+
+Only ``rosbags`` reads the bag (``ecahd_core.bag_io``): this module imports neither rclpy nor
+a ROS message package, so it runs where ROS is not installed.
+
 Writes the per-episode records and their means as JSON (``--json``), the table next to the
 paper's as markdown (``--md``) and the driven paths over the map (``--png``, Fig. 4 style: each
 episode's path, its goal as a star, the poses where the exact checker finds a wall in red);
@@ -28,7 +37,8 @@ import numpy as np
 
 log = logging.getLogger("ecahd.eval_bag")
 
-TOPICS = ("/map", "/goal_pose", "/odom", "/collision", "/cmd_vel", "/ecahd/timing")
+TOPICS = ("/map", "/goal_pose", "/odom", "/collision", "/collision_detail", "/cmd_vel",
+          "/ecahd/timing")
 COLORS = ("tab:purple", "tab:blue", "tab:orange", "tab:green", "tab:brown", "tab:pink",
           "tab:olive", "tab:cyan")
 
@@ -67,54 +77,74 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-steps", type=int, default=800, help="control steps per episode")
     p.add_argument("--control-period", type=float, default=0.1,
                    help="[s of sim time] one control step")
+    p.add_argument("--nominal-interval-ms", type=float, default=None,
+                   help="[ms] the cmd_vel period the jitter is measured against (default: the "
+                        "median interval between control ticks)")
 
 
-def _seconds(stamp) -> float:
-    return stamp.sec + stamp.nanosec * 1e-9
+def _json_records(messages, topic: str, required: tuple[str, ...]) -> list[tuple[float, dict]]:
+    """std_msgs/String JSON messages -> [(receive time [s], record)], skipping (and logging)
+    what is not a JSON object with the required keys."""
+    out = []
+    for t, m in messages:
+        try:
+            record = json.loads(m.data)
+            if not isinstance(record, dict) or any(k not in record for k in required):
+                raise ValueError
+        except (ValueError, TypeError):
+            log.warning("skipping a malformed %s record: %r", topic, str(m.data)[:80])
+            continue
+        out.append((t * 1e-9, record))
+    return out
 
 
 def evaluate_bag(path, *, robot: str = "circle", map_name: str = "recorded",
-                 goal_radius: float = 0.5, max_steps: int = 800,
-                 control_period: float = 0.1) -> BagEvaluation:
+                 goal_radius: float = 0.5, max_steps: int = 800, control_period: float = 0.1,
+                 nominal_interval_ms: float | None = None) -> BagEvaluation:
     """Read a bag and compute the metrics of each episode; raises BagError when the map, goals
     or odometry are missing."""
+    from ecahd_core.bag_io import quaternion_yaw, read_bag, stamp_seconds
     from ecahd_core.errors import BagError
-    from ecahd_core.evaluation import (control_times, evaluate_episode, split_episodes,
-                                       summarize)
+    from ecahd_core.evaluation import (cmd_intervals, control_times, evaluate_episode,
+                                       split_episodes, summarize)
     from ecahd_core.footprint import make_footprint
-    from ecahd_ros.bag_recorder import read_bag
-    from ecahd_ros.conversions import msg_to_grid, yaw_from_quaternion
+    from ecahd_core.maps import grid_from_occupancy_message
 
     data = read_bag(path, topics=TOPICS)
     for topic in ("/map", "/goal_pose", "/odom"):
         if not data.get(topic):
             raise BagError(f"bag {str(path)!r} has no {topic} messages; cannot evaluate")
-    # msg_to_grid reads the rosbags dataclass like the rclpy message (same field names) and
-    # restores the float32 resolution (0.1 stays 0.1)
-    grid = msg_to_grid(data["/map"][-1][1], name=map_name)
+    # the rosbags dataclass has the rclpy message's field names; the float32 resolution is
+    # restored (0.1 stays 0.1) as for a received map
+    grid = grid_from_occupancy_message(data["/map"][-1][1], name=map_name)
     footprint = make_footprint(robot)
     goals = [(t * 1e-9, m.pose.position.x, m.pose.position.y) for t, m in data["/goal_pose"]]
-    odom = [(t * 1e-9, _seconds(m.header.stamp), m.pose.pose.position.x,
-             m.pose.pose.position.y, yaw_from_quaternion(m.pose.pose.orientation))
+    odom = [(t * 1e-9, stamp_seconds(m.header.stamp), m.pose.pose.position.x,
+             m.pose.pose.position.y, quaternion_yaw(m.pose.pose.orientation))
             for t, m in data["/odom"]]
     collisions = [(t * 1e-9, float(m.data)) for t, m in data.get("/collision", [])]
     timing = []
-    for t, m in data.get("/ecahd/timing", []):
+    for t, record in _json_records(data.get("/ecahd/timing", []), "ecahd/timing", ("ms",)):
         try:
-            record = json.loads(m.data)
-            timing.append((t * 1e-9, float(record["ms"]), str(record.get("stage", "?"))))
-        except (ValueError, KeyError, TypeError):
-            log.warning("skipping a malformed ecahd/timing record: %r", m.data[:80])
+            timing.append((t, float(record["ms"]), str(record.get("stage", "?")), record))
+        except (ValueError, TypeError):
+            log.warning("skipping an ecahd/timing record whose ms is not a number: %r", record)
+    # None when the bag has no collision_detail topic at all (recorded before it existed)
+    contacts = (None if "/collision_detail" not in data else
+                [(t, str(r["kind"])) for t, r in _json_records(
+                    data["/collision_detail"], "collision_detail", ("kind",))])
     cmd_times = [t * 1e-9 for t, _ in data.get("/cmd_vel", [])]
     episodes = split_episodes(goals, odom, collisions=collisions, timing=timing,
-                              cmd_vel_times=cmd_times)
+                              cmd_vel_times=cmd_times, contacts=contacts)
     metrics = [evaluate_episode(ep, index=i, grid=grid, footprint=footprint,
                                 goal_radius=goal_radius, max_steps=max_steps,
-                                period=control_period)
+                                period=control_period, nominal_interval_ms=nominal_interval_ms)
                for i, ep in enumerate(episodes)]
     control = np.concatenate([control_times(ep) for ep in episodes]) if episodes else None
+    intervals = np.concatenate([cmd_intervals(ep) for ep in episodes]) if episodes else None
     return BagEvaluation(grid=grid, footprint=footprint, episodes=episodes, metrics=metrics,
-                         summary=summarize(metrics, control_ms=control))
+                         summary=summarize(metrics, control_ms=control, intervals_ms=intervals,
+                                           nominal_interval_ms=nominal_interval_ms))
 
 
 def draw_trajectories(result: BagEvaluation, path, *, title: str = "") -> Path:
@@ -181,7 +211,8 @@ def write_outputs(result: BagEvaluation, bag, *, json_path=None, md_path=None,
 def run(args: argparse.Namespace) -> int:
     result = evaluate_bag(args.bag, robot=args.robot, map_name=args.map_name,
                           goal_radius=args.goal_radius, max_steps=args.max_steps,
-                          control_period=args.control_period)
+                          control_period=args.control_period,
+                          nominal_interval_ms=args.nominal_interval_ms)
     table = write_outputs(result, args.bag, json_path=args.json, md_path=args.md,
                           png_path=args.png)
     print(table)
