@@ -1,0 +1,170 @@
+"""``ecahd eval-bag`` where ROS is not installed: a bag written here with ``rosbags`` alone is
+scored by the command in a subprocess in which rclpy and every ROS message package fail to
+import; the new records (collision_detail, the control ticks' monitor / reason / wall) come out
+as hand-counted metrics, and a bag recorded before them still evaluates."""
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
+
+from ecahd_ros.eval_bag import evaluate_bag
+
+TS = get_typestore(Stores.ROS2_JAZZY)
+T = TS.types
+BLOCKED = ("rclpy", "builtin_interfaces", "std_msgs", "geometry_msgs", "nav_msgs",
+           "sensor_msgs", "rosgraph_msgs", "visualization_msgs")
+
+
+def _time(s: float):
+    sec = int(np.floor(s))
+    return T["builtin_interfaces/msg/Time"](sec=sec, nanosec=int(round((s - sec) * 1e9)))
+
+
+def _header(s: float):
+    return T["std_msgs/msg/Header"](stamp=_time(s), frame_id="map")
+
+
+def _pose(x: float, y: float):
+    return T["geometry_msgs/msg/Pose"](
+        position=T["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
+        orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0))
+
+
+def _map_msg():
+    # 4 m x 2 m at 0.1 m (stored as float32) with a one-cell wall frame
+    data = np.zeros((20, 40), dtype=np.int8)
+    data[0, :] = data[-1, :] = data[:, 0] = data[:, -1] = 100
+    info = T["nav_msgs/msg/MapMetaData"](map_load_time=_time(0.0), resolution=0.1, width=40,
+                                         height=20, origin=_pose(0.0, 0.0))
+    return T["nav_msgs/msg/OccupancyGrid"](header=_header(0.0), info=info,
+                                           data=data.reshape(-1))
+
+
+def _odom(t: float, x: float):
+    vec = T["geometry_msgs/msg/Vector3"]
+    twist = T["geometry_msgs/msg/Twist"](linear=vec(x=0.0, y=0.0, z=0.0),
+                                         angular=vec(x=0.0, y=0.0, z=0.0))
+    return T["nav_msgs/msg/Odometry"](
+        header=_header(t), child_frame_id="base_link",
+        pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=_pose(x, 1.0),
+                                                       covariance=np.zeros(36)),
+        twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=twist,
+                                                         covariance=np.zeros(36)))
+
+
+def _string(text: str):
+    return T["std_msgs/msg/String"](data=text)
+
+
+def write_bag(path, *, new_records: bool = True) -> None:
+    """Two episodes on the one clock (receive time = sim time [s]):
+    0: goal (3.0, 1.0) at 0 s; the robot drives along y = 1 from x = 0.55 at 1 m/s, reaching
+       x = 3.0 at 2.45 s; one SD plan; five control ticks; two static-obstacle contacts.
+    1: goal (1.0, 1.0) at 3.5 s; the robot stays at x = 3.0 (never within 0.5 m); a
+       fallback_astar and an astar plan; three control ticks; a moving-obstacle and a wall
+       contact.
+    new_records False: a bag from before collision_detail and the monitor / wall keys."""
+    msgs = []  # (t [s], topic, msgtype, message)
+    msgs.append((0.0, "/map", "nav_msgs/msg/OccupancyGrid", _map_msg()))
+    for t, (x, y) in ((0.0, (3.0, 1.0)), (3.5, (1.0, 1.0))):
+        msgs.append((t, "/goal_pose", "geometry_msgs/msg/PoseStamped",
+                     T["geometry_msgs/msg/PoseStamped"](header=_header(t), pose=_pose(x, y))))
+    contacts = {1.0: "static_obstacle", 1.02: "static_obstacle", 4.0: "moving_obstacle",
+                4.5: "wall"}
+    for i in range(251):  # 50 Hz for 5 s
+        t = i / 50
+        x = min(0.55 + t, 3.0)
+        msgs.append((t, "/odom", "nav_msgs/msg/Odometry", _odom(t, x)))
+        hit = next((kind for tc, kind in contacts.items() if abs(tc - t) < 1e-9), None)
+        msgs.append((t, "/collision", "std_msgs/msg/Bool", T["std_msgs/msg/Bool"](data=bool(hit))))
+        if hit and new_records:
+            msgs.append((t + 1e-4, "/collision_detail", "std_msgs/msg/String", _string(
+                json.dumps({"t": t, "kind": hit, "obstacle": 0, "x": x, "y": 1.0,
+                            "contact_count": 1}))))
+    timing = [(0.01, {"stage": "sd", "ms": 300.0}),
+              (3.6, {"stage": "fallback_astar", "ms": 40.0}),
+              (3.7, {"stage": "astar", "ms": 20.0})]
+    ticks = [  # receive time, wall [s], monitor, reason
+        (0.05, 1000.00, "none", "follow"), (0.10, 1000.05, "stop", "follow"),
+        (0.15, 1000.10, "stop", "blocked"), (0.20, 1000.20, "slowdown", "follow"),
+        (0.25, 1000.25, "none", "goal_reached"),
+        (3.55, 2000.00, "none", "follow"), (3.60, 2000.05, "none", "follow"),
+        (3.65, 2000.10, "none", "follow")]
+    for t, wall, monitor, reason in ticks:
+        record = {"stage": "control", "ms": 1.0, "reason": reason}
+        if new_records:
+            record.update(monitor=monitor, wall=wall, map_ready=True)
+        timing.append((t, record))
+    for t, record in timing:
+        msgs.append((t, "/ecahd/timing", "std_msgs/msg/String", _string(json.dumps(record))))
+    msgs.append((0.3, "/ecahd/timing", "std_msgs/msg/String", _string("not json")))  # skipped
+    if new_records:
+        msgs.append((0.4, "/collision_detail", "std_msgs/msg/String", _string("{}")))  # no kind
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conns = {}
+        for t, topic, msgtype, msg in sorted(msgs, key=lambda m: m[0]):
+            if topic not in conns:
+                conns[topic] = writer.add_connection(topic, msgtype, typestore=TS)
+            writer.write(conns[topic], int(round(t * 1e9)) + 1,
+                         TS.serialize_cdr(msg, msgtype))
+
+
+def test_eval_bag_scores_a_bag_with_rclpy_and_ros_messages_blocked(tmp_path):
+    bag, out, md = tmp_path / "bag", tmp_path / "m.json", tmp_path / "m.md"
+    write_bag(bag)
+    code = (f"import sys\n"
+            f"for name in {BLOCKED!r}:\n"
+            f"    sys.modules[name] = None  # any import of it raises ImportError\n"
+            f"from ecahd_ros.cli import main\n"
+            f"sys.exit(main(['eval-bag', {str(bag)!r}, '--json', {str(out)!r}, "
+            f"'--md', {str(md)!r}]))\n")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "malformed ecahd/timing" in proc.stderr and "malformed collision_detail" in proc.stderr
+    result = json.loads(out.read_text())
+    assert result["map"]["resolution"] == 0.1  # the float32 0.1 restored
+    ep0, ep1 = result["episodes"]
+    # episode 0: x = 0.55 + 0.1 k > 2.5 from step k = 20 -> 2.0 s of sim time
+    assert ep0["first_reach"] == 20 and ep0["time_to_goal_s"] == pytest.approx(2.0)
+    assert ep1["reached"] is False and ep1["time_to_goal_s"] is None
+    assert (ep0["contact_steps_wall"], ep0["contact_steps_static"],
+            ep0["contact_steps_moving"]) == (0, 2, 0)
+    assert (ep1["contact_steps_wall"], ep1["contact_steps_static"],
+            ep1["contact_steps_moving"]) == (1, 0, 1)
+    assert ep0["contact_steps"] == 2 and ep1["contact_steps"] == 2  # the Bool flags agree
+    assert (ep0["monitor_stops"], ep0["monitor_slowdowns"], ep0["blocked_ticks"]) == (2, 1, 1)
+    assert (ep0["global_plans"], ep0["fallbacks"]) == (1, 0)
+    assert (ep1["global_plans"], ep1["fallbacks"]) == (2, 1)
+    assert ep0["control_ticks"] == 5 and ep0["inference_time_s"] == pytest.approx(0.3)
+    # episode 0's intervals 50, 50, 100, 50 ms (sorted 50 50 50 100, rank 0.99 * 3 = 2.97):
+    # p50 50, p99 50 + 0.97 * 50 = 98.5; |d - 50| sorted 0 0 0 50: jitter p99 0.97 * 50 = 48.5
+    assert ep0["cmd_interval_ms_p50"] == pytest.approx(50.0, abs=1e-6)
+    assert ep0["cmd_interval_ms_p99"] == pytest.approx(98.5, abs=1e-6)
+    assert ep0["cmd_jitter_ms_p99"] == pytest.approx(48.5, abs=1e-6)
+    mean = result["mean"]
+    assert (mean["wall_contact_episodes"], mean["static_contact_episodes"],
+            mean["moving_contact_episodes"]) == (1, 1, 1)
+    assert mean["monitor_stops"] == 1.0 and mean["global_plans"] == 1.5
+    assert mean["fallbacks"] == 0.5 and mean["time_to_goal_s"] == pytest.approx(2.0)
+    # pooled 50 50 100 50 | 50 50 (rank 0.99 * 5 = 4.95): p99 50 + 0.95 * 50 = 97.5,
+    # jitter p99 0.95 * 50 = 47.5
+    assert mean["cmd_interval_ms_p99"] == pytest.approx(97.5, abs=1e-6)
+    assert mean["cmd_jitter_ms_p99"] == pytest.approx(47.5, abs=1e-6)
+    assert "moving-obstacle contact: 1 / 1 / 1 of 2" in md.read_text()
+
+
+def test_a_bag_from_before_the_new_records_still_evaluates(tmp_path):
+    write_bag(tmp_path / "old", new_records=False)
+    result = evaluate_bag(tmp_path / "old", map_name="old")
+    ep0, ep1 = result.metrics
+    assert ep0.contact_steps == 2 and ep0.contact_steps_static is None  # flags only
+    assert (ep0.monitor_stops, ep0.blocked_ticks, ep0.global_plans) == (0, 1, 1)
+    assert ep0.cmd_jitter_ms_p99 is None and ep0.first_reach == 20
+    s = result.summary
+    assert s.static_contact_episodes is None and s.cmd_interval_ms_p50 is None
+    assert s.global_plans == 1.5 and s.monitor_stops == 0.0
