@@ -108,6 +108,28 @@ def test_records_every_message_received_and_reads_them_back(ros_context, tmp_pat
     assert list(read_bag(bag, topics=["/collision"])) == ["/collision"]
 
 
+def test_default_topics_cover_what_eval_bag_reads_and_the_typestore_knows_their_types():
+    from ecahd_ros.eval_bag import TOPICS as EVAL_TOPICS
+
+    defaults = {"/" + t for t in bag_recorder.DEFAULT_TOPICS}
+    assert set(EVAL_TOPICS) <= defaults  # a default recording can be scored by eval-bag
+    # obstacles and sensing (issues 9, 11): contact kinds, replan requests, the rolling
+    # costmap and the scans are recorded by default
+    assert {"/collision_detail", "/ecahd/replan", "/local_costmap", "/scan"} <= defaults
+    assert len(set(bag_recorder.DEFAULT_TOPICS)) == len(bag_recorder.DEFAULT_TOPICS)
+    spec = next(p for p in bag_recorder.PARAMETERS if p.name == "topics")
+    assert spec.default == bag_recorder.DEFAULT_TOPICS
+    # their types are in the typestore the recorder writes with (else they would be skipped)
+    store = get_typestore(bag_recorder.TYPESTORE)
+    for msgtype in ("std_msgs/msg/String", "nav_msgs/msg/OccupancyGrid",
+                    "sensor_msgs/msg/LaserScan", "std_msgs/msg/Bool"):
+        assert msgtype in store.fielddefs
+    # read_bag lives in the core (no rclpy) and is re-exported here for older imports
+    from ecahd_core import bag_io
+
+    assert read_bag is bag_io.read_bag
+
+
 def test_existing_output_is_refused_and_nothing_is_overwritten(ros_context, tmp_path):
     (tmp_path / "keep.txt").write_text("mine")
     recorder = BagRecorder(context=ros_context,
