@@ -239,6 +239,23 @@ def format_table(result: NavigationBenchResult) -> str:
          for v in ours])
     row("Goal -> first plan p50 / max [ms]",
         [_pair(*_latency(v.goal_to_plan_ms), 1) for v in ours])
+    # obstacles off the map, the collision monitor, replanning, cmd_vel timing (issues 9, 11);
+    # .get: results saved before these keys existed show "-"
+    row("Episodes with a static / moving obstacle contact",
+        [_pair(v.summary.get("static_contact_episodes"),
+               v.summary.get("moving_contact_episodes"), 0)
+         + ("" if v.summary.get("static_contact_episodes") is None
+            else f" of {v.summary['episodes']}") for v in ours])
+    row("Collision monitor stops / slowdowns [control ticks / episode]",
+        [_pair(v.summary.get("monitor_stops"), v.summary.get("monitor_slowdowns"), 1)
+         for v in ours])
+    row("Global plans (first + replans) / A* fallbacks [per episode]",
+        [_pair(v.summary.get("global_plans"), v.summary.get("fallbacks"), 1) for v in ours])
+    row("Time to goal [s of sim time, reaching episodes]",
+        [_fmt(v.summary.get("time_to_goal_s"), 1) for v in ours])
+    row("cmd_vel interval p99 / jitter p99 [ms, wall clock]",
+        [_pair(v.summary.get("cmd_interval_ms_p99"), v.summary.get("cmd_jitter_ms_p99"), 1)
+         for v in ours])
     row("Wall time: run / episodes [s]", [f"{v.wall_s:.1f} / {v.episodes_wall_s:.1f}"
                                           for v in ours])
     lines = ["| " + " | ".join(head) + " |",
