@@ -158,3 +158,45 @@ class LocalWorld:
     def stale(self) -> bool:
         """A scan changed the window since the last fusion."""
         return self._dirty
+
+
+class ObstacleMemory:
+    """The global planner's memory of obstacles the scans found (local costmap windows pasted
+    onto the static map's lattice): a marked cell is remembered for ``persistence`` seconds
+    unless a later window sees it free, so a detour does not lead back into a blockage that
+    has left the robot's rolling window. No rclpy.
+
+    Args:
+        grid: the static GridMap; persistence: [s] how long a mark outlives its last sighting.
+    """
+
+    def __init__(self, grid: GridMap, persistence: float = 60.0) -> None:
+        self.grid = grid
+        self.persistence = float(persistence)
+        self._last = np.full(grid.data.shape, -np.inf)  # (H, W) [s] last time marked
+
+    def update(self, window: GridMap, now: float) -> None:
+        """A window (its ``data``: 100 marked, 0 seen free, -1 not seen) at time ``now`` [s]."""
+        if abs(window.resolution - self.grid.resolution) > 1e-9:
+            raise EcahdError(f"local costmap resolution {window.resolution} differs from the "
+                             f"map's {self.grid.resolution}")
+        c0 = int(round((window.origin[0] - self.grid.origin[0]) / self.grid.resolution))
+        r0 = int(round((window.origin[1] - self.grid.origin[1]) / self.grid.resolution))
+        h, w = window.data.shape
+        H, W = self.grid.data.shape
+        rs, re, cs, ce = max(0, r0), min(H, r0 + h), max(0, c0), min(W, c0 + w)
+        if rs >= re or cs >= ce:
+            return
+        sub = window.data[rs - r0:re - r0, cs - c0:ce - c0]
+        last = self._last[rs:re, cs:ce]
+        last[sub >= window.occupied_threshold] = now
+        last[sub == 0] = -np.inf  # seen free: whatever was there has gone
+
+    def mask(self, now: float, within: float | None = None) -> np.ndarray:
+        """(H, W) bool cells remembered as blocked at ``now`` (marked in the last ``within``
+        seconds; default the persistence)."""
+        return self._last >= now - (self.persistence if within is None else within)
+
+    def fused(self, now: float, within: float | None = None) -> GridMap:
+        """The static map with the remembered cells occupied."""
+        return fuse_grid(self.grid, self.mask(now, within), self.grid.origin)

@@ -84,6 +84,7 @@ from ecahd_ros.spin import spin_node
 
 METHODS = ("sd", "astar", "fd")  # ECAHD's Sparse Diffusion; the Table III baselines' planners
 ASTAR_SPACING = 0.25  # [m] most distance between consecutive points of a published A* path
+RECENT_OBSTACLES = 2.0  # [s] a detour that the whole memory blocks tries what was seen lately
 
 PARAMETERS = [
     ParamSpec("method", "sd", f"global planner: {list(METHODS)} (sd: ECAHD, replanned at each "
@@ -98,7 +99,7 @@ PARAMETERS = [
     ParamSpec("epsilon", 1.0, "[m] goal-reaching radius of the best-of-N rule"),
     ParamSpec("selection", "collision_aware", f"best-of-N rule: {list(SELECTION_RULES)} "
                                               "(shortest_reaching: Sec. III-A's)"),
-    *shared("robot", "footprint", "footprint_padding", "global_frame"),
+    *shared("robot", "footprint", "footprint_padding", "global_frame", "clearance_margin"),
     ParamSpec("waypoint_tolerance", 0.3, "[m] reaching the next waypoint this close replans "
                                          "with horizon P^g - p (sd); the goal this close is "
                                          "reached"),
@@ -106,6 +107,8 @@ PARAMETERS = [
                                           "Algorithm 1; once: one SD plan per goal)"),
     ParamSpec("replan_timeout", 5.0, "[s] sd: with no waypoint reached for this long, replan "
                                      "from the current pose (same horizon); 0 = never"),
+    ParamSpec("obstacle_memory", 60.0, "[s] obstacles the local costmap found are avoided "
+                                       "by re-plans for this long unless seen gone"),
     *shared("seed", "torch_threads"),
 ]
 
@@ -128,16 +131,19 @@ class GlobalPlannerParams:
     footprint: str
     footprint_padding: float
     global_frame: str
+    clearance_margin: float
     waypoint_tolerance: float
     replan: str
     replan_timeout: float
+    obstacle_memory: float
     seed: int
     torch_threads: int
 
     def __post_init__(self) -> None:
         require_positive(self, "num_candidates", "epsilon", "waypoint_tolerance",
                          "torch_threads")
-        require_non_negative(self, "ddim_steps", "footprint_padding", "seed", "replan_timeout")
+        require_non_negative(self, "ddim_steps", "footprint_padding", "seed", "replan_timeout",
+                             "obstacle_memory", "clearance_margin")
         require(self.method in METHODS, "method", self.method, f"one of {list(METHODS)}")
         require(self.horizon >= 2, "horizon", self.horizon, ">= 2")
         require(self.selection in SELECTION_RULES, "selection", self.selection,
@@ -189,6 +195,7 @@ class GlobalPlanner(Node):
         self.params: GlobalPlannerParams = read_parameters(self, PARAMETERS, GlobalPlannerParams)
         p = self.params
         self.footprint = make_robot(p)
+        self.judged = make_robot(p, margin=p.clearance_margin)  # what waypoints must clear
         if p.method in ("sd", "fd"):  # an unreadable or mismatched model fails now
             from ecahd_core.model_zoo import check_model
 
@@ -218,7 +225,8 @@ class GlobalPlanner(Node):
                                  self._guard(self._on_local_costmap), VIZ_QOS)
         self.create_subscription(String, "ecahd/replan", self._guard(self._on_replan),
                                  STREAM_QOS)
-        self.local = None  # GridMap of the refiner's latest local costmap window
+        self.memory = None  # ecahd_core.sensing.ObstacleMemory of the scanned obstacles
+        self._cost_cache = None  # (key of the fused grid, its J tuple)
         self.fallbacks = 0  # A* fallbacks after repeated "blocked" replans
         # a goal coalesced in a burst is planned within one period even without odometry
         self.create_timer(p.runner_config().min_plan_interval, self._guard(self._on_pending))
@@ -274,6 +282,10 @@ class GlobalPlanner(Node):
         else:
             fd = self._build_fd(grid)
         self.grid, self.sparse, self.astar, self.fd = grid, sparse, astar, fd
+        from ecahd_core.sensing import ObstacleMemory
+
+        self.memory = ObstacleMemory(grid, p.obstacle_memory)
+        self._cost_cache = (None, sparse.cost) if sparse is not None else None
         self.get_logger().info(f"map {grid.name!r} received ({grid.width} x {grid.height} "
                                f"cells); {p.method} planner built")
         if self.runner.goal is not None:
@@ -340,7 +352,10 @@ class GlobalPlanner(Node):
         if msg.header.frame_id != self.params.global_frame:
             raise EcahdError(f"local_costmap in frame {msg.header.frame_id!r} ignored: expected "
                              f"{self.params.global_frame!r}")
-        self.local = msg_to_grid(msg, name="local_costmap", unknown_is_occupied=False)
+        if self.memory is None:
+            return
+        window = msg_to_grid(msg, name="local_costmap", unknown_is_occupied=False)
+        self.memory.update(window, self._now())
 
     def _on_replan(self, msg: String) -> None:
         """The refiner cannot follow the plan (a segment blocked by a scanned obstacle)."""
@@ -357,14 +372,22 @@ class GlobalPlanner(Node):
         self._step()
 
     def _fused_grid(self):
-        """The static map with the local costmap's marked cells occupied, or the static map."""
-        from ecahd_core.sensing import fuse_grid
-
-        if self.local is None or self.grid is None \
-                or abs(self.local.resolution - self.grid.resolution) > 1e-9:
+        """The static map with the obstacles the scans found (remembered for
+        ``obstacle_memory`` s unless seen gone), or the static map."""
+        if self.memory is None:
             return self.grid
-        return fuse_grid(self.grid, self.local.data >= self.local.occupied_threshold,
-                         self.local.origin)
+        return self.memory.fused(self._now())
+
+    def _fused_cost(self):
+        """J's (costmap, footprint points, config) on :meth:`_fused_grid`, rebuilt only when
+        the remembered obstacles changed."""
+        from ecahd_core.cost import CollisionCost
+
+        grid = self._fused_grid()
+        key = None if grid is self.grid else grid.occupied.tobytes()
+        if self._cost_cache is None or self._cost_cache[0] != key:
+            self._cost_cache = (key, CollisionCost.build(grid, self.footprint).as_tuple())
+        return self._cost_cache[1]
 
     def _on_pending(self) -> None:
         if self.runner.pending:
@@ -403,11 +426,8 @@ class GlobalPlanner(Node):
             waypoints, ms = self._plan_fallback(start, goal)
         elif method == "sd":
             saved = self.sparse.cost
-            if blocked and saved is not None:  # weigh the candidates by J with the scans too
-                from ecahd_core.cost import CollisionCost
-
-                self.sparse.cost = CollisionCost.build(self._fused_grid(),
-                                                       self.footprint).as_tuple()
+            if saved is not None:  # weigh the candidates by J with the scanned obstacles too
+                self.sparse.cost = self._fused_cost()
             try:
                 result = self.sparse.plan(start, goal, horizon=request.horizon,
                                           generator=self.generator)
@@ -425,7 +445,7 @@ class GlobalPlanner(Node):
         if method == "sd":  # SD's waypoints in a wall move to the nearest free pose (ours)
             from ecahd_core.navigation import snap_waypoints
 
-            waypoints, moved = snap_waypoints(self._fused_grid(), self.footprint, waypoints)
+            waypoints, moved = snap_waypoints(self._fused_grid(), self.judged, waypoints)
             if moved:
                 detail += f", {moved} waypoint(s) moved out of collision"
         stamp = self.get_clock().now()
@@ -446,7 +466,19 @@ class GlobalPlanner(Node):
         from ecahd_core.navigation import detour
 
         t0 = time.perf_counter()
-        path = resample(detour(self._fused_grid(), self.footprint, start, goal), ASTAR_SPACING)
+        now = self._now()
+        # what is remembered, else only what was seen lately (a moving obstacle's trail in the
+        # memory can close every way), else the static map
+        grids = [self.memory.fused(now), self.memory.fused(now, within=RECENT_OBSTACLES),
+                 self.grid] if self.memory is not None else [self.grid]
+        for i, grid in enumerate(grids):
+            try:
+                path = detour(grid, self.footprint, start, goal)
+                break
+            except PlanningError:
+                if i == len(grids) - 1:
+                    raise
+        path = resample(path, ASTAR_SPACING)
         self.fallbacks += 1
         self.get_logger().warning(
             f"replan after {self.runner.blocked_count} blocked segment(s): fallback to A* on "

@@ -78,7 +78,8 @@ from ecahd_ros.spin import spin_node
 
 PARAMETERS = [
     ParamSpec("dd_model", "", "DD checkpoint path; '' = the shipped model for map_name"),
-    *shared("map_name", "robot", "footprint", "footprint_padding", "global_frame"),
+    *shared("map_name", "robot", "footprint", "footprint_padding", "global_frame",
+            "clearance_margin"),
     ParamSpec("c_th", DenseConfig().c_th, "DD refines a local plan whose collision cost c^l "
                                           "exceeds this"),
     ParamSpec("dd_enabled", True, "run Dense Diffusion at all; false: follow the straight local "
@@ -141,6 +142,7 @@ class LocalRefinerParams:
     footprint: str
     footprint_padding: float
     global_frame: str
+    clearance_margin: float
     c_th: float
     dd_enabled: bool
     polish_steps: int
@@ -178,6 +180,7 @@ class LocalRefinerParams:
                          "waypoint_tolerance", "goal_tolerance", "stale_timeout",
                          "torch_threads")
         require_non_negative(self, "c_th", "footprint_padding", "plan_timeout", "seed",
+                             "clearance_margin",
                              "polish_steps", "prepare_ahead", "obstacle_persistence")
         require_positive(self, "local_costmap_size", "local_costmap_rate",
                          "monitor_time_to_collision", "monitor_source_timeout")
@@ -357,8 +360,8 @@ class LocalRefiner(Node):
             cost_config=cost.config,
             dense=DenseConfig(points=self.points, c_th=p.c_th, enabled=p.dd_enabled,
                               polish_steps=p.polish_steps))
-        refiner = SegmentRefiner(planner, grid, self.footprint, generator=self.generator,
-                                 exact=p.exact_check)
+        refiner = SegmentRefiner(planner, grid, make_robot(p, margin=p.clearance_margin),
+                                 generator=self.generator, exact=p.exact_check)
         world = None
         if p.use_scan:
             from ecahd_core.sensing import LocalWorld

@@ -139,6 +139,9 @@ SHARED = {spec.name: spec for spec in [
     ParamSpec("footprint", "", "Nav2 footprint polygon '[[x, y], ...]' [m]; overrides robot"),
     ParamSpec("footprint_padding", 0.0, "[m] grows the footprint (Nav2 footprint_padding)"),
     ParamSpec("global_frame", "map", "frame of goals, odometry poses and plans"),
+    ParamSpec("clearance_margin", 0.02, "[m] the exact checker judges local plans and "
+                                        "waypoints with the footprint grown by this (ours: "
+                                        "room for the controller's tracking error)"),
     ParamSpec("seed", 0, "seed of the sampler's torch.Generator (a seed reproduces the plans)"),
     ParamSpec("torch_threads", 1, "torch.set_num_threads (and interop threads) of this "
                                   "process: 1 keeps inference off the other cores"),
@@ -150,9 +153,10 @@ def shared(*names: str) -> list[ParamSpec]:
     return [SHARED[name] for name in names]
 
 
-def make_robot(params):
-    """The Footprint of a params dataclass with robot, footprint and footprint_padding."""
+def make_robot(params, *, margin: float = 0.0):
+    """The Footprint of a params dataclass with robot, footprint and footprint_padding, grown
+    by ``margin`` [m] more (the exact checker's clearance margin)."""
     from ecahd_core.footprint import make_footprint
 
     return make_footprint(robot_spec(params.robot, params.footprint),
-                          padding=params.footprint_padding)
+                          padding=params.footprint_padding + margin)
