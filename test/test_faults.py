@@ -614,30 +614,45 @@ def test_malformed_input_to_planner_and_refiner(ros_context, capfd, tmp_path):
             "clock": probe.create_publisher(Clock, "/clock", STREAM_QOS)}
     t0 = time.monotonic()
 
+    publishing = threading.Lock()  # the test thread and the probe's timer share publishers
+
+    def publish(topic: str, msg) -> None:
+        with publishing:
+            pubs[topic].publish(msg)
+
     def tick() -> None:  # a simulator's /clock (from 100 s) and a robot standing at WEST
         now = 100.0 + time.monotonic() - t0
-        pubs["clock"].publish(Clock(clock=Time(sec=int(now), nanosec=int(now % 1 * 1e9))))
-        pubs["odom"].publish(odom_msg())
+        publish("clock", Clock(clock=Time(sec=int(now), nanosec=int(now % 1 * 1e9))))
+        publish("odom", odom_msg())
 
     probe.create_timer(0.05, tick)
     spinner = Spinner(ros_context, [planner, refiner, recorder, probe])
     logs = Logs(capfd)
 
     def bad_messages(topic: str, messages, nodes: dict[str, tuple[int, int]]) -> None:
-        """Publish each message (0.1 s apart at least: the latched topics keep one), then expect
-        between lo and hi error lines per message in each node of ``nodes``."""
+        """Publish each message, then expect between lo and hi error lines per message in each
+        node of ``nodes``. A message the nodes have not answered after 1 s is published again
+        (at most 5 times): in-process delivery under a multi-threaded executor here now and then
+        loses one (seen for valid and malformed messages alike), and what is tested is the
+        nodes' answer, not DDS; hi is then per publication."""
         for what, msg in messages:
             mark = logs.mark()
-            pubs[topic].publish(msg)
-            wait_for(lambda: all(len(logs.errors(n, mark)) >= lo for n, (lo, _) in nodes.items()),
-                     f"{topic} {what}: error lines from {list(nodes)}", 5.0)
+            sent = 0
+            deadline = time.monotonic() + 8.0
+            while not all(len(logs.errors(n, mark)) >= lo for n, (lo, _) in nodes.items()):
+                assert time.monotonic() < deadline, f"{topic} {what}: no error line from " \
+                    f"{[n for n, (lo, _) in nodes.items() if len(logs.errors(n, mark)) < lo]}"
+                if sent < 5 and (sent == 0 or time.monotonic() > last + 1.0):
+                    publish(topic, msg)
+                    sent, last = sent + 1, time.monotonic()
+                time.sleep(0.01)
             time.sleep(0.1)
             for n, (lo, hi) in nodes.items():
                 lines = logs.errors(n, mark)
-                assert lo <= len(lines) <= hi, (topic, what, n, lines)
+                assert lo <= len(lines) <= hi * sent, (topic, what, n, lines)
 
     try:
-        pubs["map"].publish(map_msg())
+        publish("map", map_msg())
         wait_for(lambda: planner.ready and refiner.planner is not None and got["cmds"]
                  and "/goal_pose" in recorder._recording, "nodes up", 30.0)
         both, planner_only, refiner_only = ({"global_planner": (1, 1), "local_refiner": (1, 1)},
@@ -670,7 +685,7 @@ def test_malformed_input_to_planner_and_refiner(ros_context, capfd, tmp_path):
             ("value 127", map_msg(data=[127] * len(data)))], both)
         # rclpy's time source raises on a negative /clock: spin_forever logs it once
         mark = logs.mark()
-        pubs["clock"].publish(Clock(clock=Time(sec=-5, nanosec=0)))
+        publish("clock", Clock(clock=Time(sec=-5, nanosec=0)))
         wait_for(lambda: "exception while spinning" in logs.read()[mark:], "the clock error")
         time.sleep(0.2)
         assert logs.read()[mark:].count("exception while spinning") == 1
@@ -680,10 +695,10 @@ def test_malformed_input_to_planner_and_refiner(ros_context, capfd, tmp_path):
         long_plan = np.stack([np.linspace(WEST[0], 4.5, 10_000), np.full(10_000, Y)], axis=1)
         mark = logs.mark()
         n = len(got["cmds"])
-        pubs["plan"].publish(plan_msg(long_plan))
+        publish("plan", plan_msg(long_plan))
         wait_for(lambda: any(v > 0 for v, _ in got["cmds"][n:]), "driving the long plan")
         assert not logs.errors("local_refiner", mark)
-        pubs["goal_pose"].publish(goal_msg(4.5, Y + 0.2))
+        publish("goal_pose", goal_msg(4.5, Y + 0.2))
         wait_for(lambda: got["plans"], "a plan to the valid goal")
         assert np.allclose(got["plans"][-1][-1], (4.5, Y + 0.2))
         n = len(got["cmds"])
