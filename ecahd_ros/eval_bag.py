@@ -69,6 +69,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", default=None, help="write per-episode records and means here")
     p.add_argument("--md", default=None, help="write the markdown table here")
     p.add_argument("--png", default=None, help="write the trajectories figure here")
+    p.add_argument("--snapshot", type=float, default=None, metavar="T",
+                   help="instead: draw what the robot knew T s (sim time) after the first goal "
+                        "(map, local costmap, scan, plans, driven path) into --png")
     p.add_argument("--robot", default="circle",
                    help="footprint for the exact path check: circle | quadruped | humanoid | "
                         "Nav2 polygon (the bag does not record it)")
@@ -208,7 +211,94 @@ def write_outputs(result: BagEvaluation, bag, *, json_path=None, md_path=None,
     return table
 
 
+def draw_snapshot(bag, at: float, path, *, map_name: str = "recorded") -> Path:
+    """What the robot knew ``at`` seconds (sim time) after the bag's first goal: the map, the
+    latest local costmap window (its marks red, cells seen free light green), the latest scan's
+    returns (blue dots), the global plan (purple) and local plan (orange) in force, the path
+    driven so far (black) and contacts (red crosses). Needs the topics bag_recorder records by
+    default; raises BagError without map, goal_pose or odom."""
+    import math
+
+    from ecahd_core.bag_io import quaternion_yaw, read_bag
+    from ecahd_core.errors import BagError
+    from ecahd_core.maps import grid_from_occupancy_message
+    from ecahd_core.viz import draw_map, pyplot
+
+    data = read_bag(bag, topics=["/map", "/goal_pose", "/odom", "/scan", "/local_costmap",
+                                 "/plan", "/local_plan", "/collision_detail"])
+    for topic in ("/map", "/goal_pose", "/odom"):
+        if not data.get(topic):
+            raise BagError(f"bag {str(bag)!r} has no {topic} messages; cannot draw")
+    t0 = data["/goal_pose"][0][0]
+    cut = t0 + int(at * 1e9)
+
+    def latest(topic):
+        msgs = [m for t, m in data.get(topic, []) if t <= cut]
+        return msgs[-1] if msgs else None
+
+    grid = grid_from_occupancy_message(data["/map"][-1][1], name=map_name)
+    plt = pyplot()
+    xmin, ymin, xmax, ymax = grid.bounds
+    fig, ax = plt.subplots(figsize=(8, 8 * (ymax - ymin) / (xmax - xmin) + 0.6))
+    draw_map(ax, grid)
+    window = latest("/local_costmap")
+    if window is not None:
+        w = grid_from_occupancy_message(window, name="local_costmap", unknown_is_occupied=False)
+        wx0, wy0, wx1, wy1 = w.bounds
+        rgba = np.zeros(w.data.shape + (4,))
+        rgba[w.data == 0] = (0.2, 0.8, 0.2, 0.18)
+        rgba[w.data >= 65] = (0.9, 0.1, 0.1, 0.9)
+        ax.imshow(rgba, origin="lower", extent=(wx0, wx1, wy0, wy1), interpolation="nearest")
+        ax.plot([wx0, wx1, wx1, wx0, wx0], [wy0, wy0, wy1, wy1, wy0], color="green", lw=0.8,
+                label="local costmap window (red: marked)")
+    odom = [(t, m.pose.pose) for t, m in data["/odom"] if t <= cut]
+    xy = np.array([[p.position.x, p.position.y] for _, p in odom])
+    ax.plot(xy[:, 0], xy[:, 1], color="black", lw=1.2, label="driven")
+    pose = odom[-1][1]
+    yaw = quaternion_yaw(pose.orientation)
+    scan = latest("/scan")
+    if scan is not None:
+        r = np.asarray(scan.ranges, dtype=float)
+        a = yaw + scan.angle_min + scan.angle_increment * np.arange(len(r))
+        ok = np.isfinite(r)
+        ax.plot(pose.position.x + r[ok] * np.cos(a[ok]), pose.position.y + r[ok] * np.sin(a[ok]),
+                ".", color="tab:blue", ms=2, label="scan returns")
+    for topic, color, label in (("/plan", "tab:purple", "global plan"),
+                                ("/local_plan", "tab:orange", "local plan")):
+        msg = latest(topic)
+        if msg is not None and msg.poses:
+            pts = np.array([[p.pose.position.x, p.pose.position.y] for p in msg.poses])
+            ax.plot(pts[:, 0], pts[:, 1], "o-", color=color, ms=3, lw=1.2, label=label)
+    goal = latest("/goal_pose")
+    if goal is not None:
+        ax.plot(goal.pose.position.x, goal.pose.position.y, "*", color="gold", ms=16,
+                markeredgecolor="black", label="goal")
+    contacts = [m for t, m in data.get("/collision_detail", []) if t <= cut]
+    if contacts:
+        import json
+
+        pts = np.array([[json.loads(m.data)["x"], json.loads(m.data)["y"]] for m in contacts])
+        ax.plot(pts[:, 0], pts[:, 1], "x", color="red", ms=5, label="contact")
+    ax.plot(pose.position.x, pose.position.y, "o", color="black", ms=6)
+    ax.arrow(pose.position.x, pose.position.y, 0.3 * math.cos(yaw), 0.3 * math.sin(yaw),
+             width=0.02, color="black")
+    ax.legend(loc="best", fontsize=7, framealpha=0.8)
+    ax.set_title(f"t = {at:g} s (sim) after the first goal of {bag}", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Path(path)
+
+
 def run(args: argparse.Namespace) -> int:
+    if args.snapshot is not None:
+        if not args.png:
+            from ecahd_core.errors import EcahdError
+
+            raise EcahdError("--snapshot needs --png")
+        log.info("wrote %s", draw_snapshot(args.bag, args.snapshot, args.png,
+                                           map_name=args.map_name))
+        return 0
     result = evaluate_bag(args.bag, robot=args.robot, map_name=args.map_name,
                           goal_radius=args.goal_radius, max_steps=args.max_steps,
                           control_period=args.control_period,
