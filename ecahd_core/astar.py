@@ -250,15 +250,7 @@ class AStarPlanner:
         else:
             raise PlanningError(f"A* found no path between cells {start_cell} and {goal_cell} "
                                 f"on map {self.grid.name!r} with clearance {self.clearance:.3f} m")
-        cells = []
-        node = goal
-        while True:
-            row, col = divmod(node, stride)
-            cells.append((row - 1, col - 1))
-            if node == start:
-                break
-            node = parent[node]
-        return cells[::-1]
+        return _unwind(parent, start, goal, stride)
 
     # ---------------------------------------------------------------------------- smoothing
     def shortcut(self, path: np.ndarray) -> np.ndarray:
@@ -693,18 +685,24 @@ class CoarseAStarPlanner:
         else:
             raise PlanningError(f"A* found no path between cells {start_cell} and {goal_cell} "
                                 f"within coarse nodes {sorted(nodes)} on map {self.grid.name!r}")
-        cells = []
-        node = goal
-        while True:
-            row, col = divmod(node, stride)
-            cells.append((row - 1, col - 1))
-            if node == start:
-                break
-            node = parent[node]
-        return cells[::-1]
+        return _unwind(parent, start, goal, stride)
 
 
 # ------------------------------------------------------------------------------- helpers
+def _unwind(parent: dict, start: int, goal: int, stride: int) -> list[tuple[int, int]]:
+    """The (row, col) cells from ``start`` to ``goal`` along ``parent`` links of flat indices
+    into a grid padded by one cell (``stride`` = its width)."""
+    cells = []
+    node = goal
+    while True:
+        row, col = divmod(node, stride)
+        cells.append((row - 1, col - 1))
+        if node == start:
+            break
+        node = parent[node]
+    return cells[::-1]
+
+
 def astar_path(grid: GridMap, start_xy, goal_xy, clearance: float, *, smooth: bool = True) -> np.ndarray:
     """One A* query: (N, 2) world path [m] from exactly ``start_xy`` to exactly ``goal_xy``.
 

@@ -114,9 +114,7 @@ PARAMETERS = [
     ParamSpec("obstacle_persistence", 2.0, "[s] a scanned obstacle not seen again for this long "
                                            "is forgotten; 0 = until a ray clears it"),
     ParamSpec("local_costmap_rate", 2.0, "[Hz] publishing rate of 'local_costmap'"),
-    ParamSpec("scan_offset_x", 0.0, "[m] the scanner's x on base_link (as sim_bridge's)"),
-    ParamSpec("scan_offset_y", 0.0, "[m] the scanner's y on base_link"),
-    ParamSpec("scan_offset_yaw", 0.0, "[rad] the scanner's yaw on base_link"),
+    *shared("scan_offset_x", "scan_offset_y", "scan_offset_yaw"),
     ParamSpec("collision_monitor", True, "stop / slow down any cmd_vel whose footprint, swept "
                                          "over monitor_time_to_collision, hits a scan point "
                                          "that is not on the static map"),

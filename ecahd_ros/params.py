@@ -143,6 +143,10 @@ SHARED = {spec.name: spec for spec in [
                                         "waypoints with the footprint grown by this (ours: "
                                         "room for the controller's tracking error)"),
     ParamSpec("seed", 0, "seed of the sampler's torch.Generator (a seed reproduces the plans)"),
+    ParamSpec("scan_offset_x", 0.0, "[m] x of the LiDAR on base_link (the base_link -> "
+                                    "base_scan transform; sim_bridge and local_refiner agree)"),
+    ParamSpec("scan_offset_y", 0.0, "[m] y of the LiDAR on base_link"),
+    ParamSpec("scan_offset_yaw", 0.0, "[rad] heading of the LiDAR on base_link"),
     ParamSpec("torch_threads", 1, "torch.set_num_threads (and interop threads) of this "
                                   "process: 1 keeps inference off the other cores"),
 ]}

@@ -86,7 +86,7 @@ from ecahd_core.scenario import Obstacle, read_scenario
 from ecahd_ros.conversions import grid_to_msg, pose_from_xy_yaw, yaw_from_quaternion
 from ecahd_ros.qos import MAP_QOS, STREAM_QOS, VIZ_QOS
 from ecahd_ros.params import (ParamSpec, declare_parameters, read_parameters, require,
-                              require_non_negative, require_positive)
+                              require_non_negative, require_positive, shared)
 from ecahd_ros.spin import spin_node
 from sim_bridge.sim import WALL_HEIGHT, MazeSim, SimConfig, SimError, SimState, scan_angles
 
@@ -119,9 +119,7 @@ PARAMETERS = [
     ParamSpec("scan_range_min", 0.1, "[m] closer returns read -inf (REP 117)"),
     ParamSpec("scan_range_max", 8.0, "[m] no return within it reads +inf (REP 117)"),
     ParamSpec("scan_noise_std", 0.0, "[m] standard deviation of Gaussian range noise"),
-    ParamSpec("scan_offset_x", 0.0, "[m] LiDAR position in base_link (base_link -> base_scan)"),
-    ParamSpec("scan_offset_y", 0.0, "[m] LiDAR position in base_link (base_link -> base_scan)"),
-    ParamSpec("scan_offset_yaw", 0.0, "[rad] LiDAR heading in base_link (base_link -> base_scan)"),
+    *shared("scan_offset_x", "scan_offset_y", "scan_offset_yaw"),
     ParamSpec("scan_frame_id", "base_scan", "header.frame_id of the scans"),
     ParamSpec("seed", 0, "seed of the simulator's random generator (scan noise)"),
     ParamSpec("obstacles_file", "", "scenario YAML of obstacles that are not on the map "
