@@ -240,3 +240,69 @@ def test_tick_work_does_not_grow_with_plan_length():
     r.set_plan(wiggly, 0.0)
     r.tick(0.0)
     assert len(r.tracker.points) < 50  # one segment of the simplified plan
+
+
+# ------------------------------------------------------------------ blocked corridor -> detour
+def two_corridor_map():
+    """A 6 x 4 m room at 0.1 m/cell split by a wall block x in [1, 5], y in [1.5, 2.5]: a
+    bottom corridor y in [0, 1.5] and a top corridor y in [2.5, 4], both 1.5 m wide."""
+    from ecahd_core.maps import GridMap
+
+    data = np.zeros((40, 60), dtype=np.int8)
+    data[15:25, 10:50] = 100
+    return GridMap(data, 0.1, (0.0, 0.0), name="two-corridors")
+
+
+def test_a_scanned_blockage_sends_the_detour_through_the_other_corridor():
+    from ecahd_core.cost import CollisionCost
+    from ecahd_core.footprint import make_footprint
+    from ecahd_core.navigation import detour
+    from ecahd_core.sensing import LocalWorld, ObstacleMemory, Scan
+
+    grid, robot = two_corridor_map(), make_footprint("circle")
+    start, goal = (0.5, 0.75), (5.5, 0.75)
+    assert np.all(detour(grid, robot, start, goal)[:, 1] < 1.5)  # unblocked: the bottom way
+    # a robot at (2, 0.75) facing +x scans a box wall to wall across the bottom corridor at
+    # x = 3: beams within +-60 deg hit the plane x = 3 at range 1 / cos(angle)
+    angles = np.linspace(-np.pi / 3, np.pi / 3, 121)
+    world = LocalWorld(grid, CollisionCost.build(grid, robot))
+    world.add_scan((2.0, 0.75, 0.0), Scan(ranges=1.0 / np.cos(angles), angle_min=-np.pi / 3,
+                                          angle_increment=angles[1] - angles[0],
+                                          range_min=0.1, range_max=8.0, stamp=0.0))
+    fused, _ = world.fused(force=True)
+    # column x in [3.0, 3.1] blocked from y = 0 up to the wall block; the row next to the block
+    # (y in [1.4, 1.5]) counts as the block's own (marks within one cell of a known obstacle)
+    assert fused.occupied[:14, 30].all() and not grid.occupied[:14, 30].any()
+    # the planner's memory of that window routes round it through the top corridor
+    memory = ObstacleMemory(grid, persistence=60.0)
+    from ecahd_core.maps import GridMap
+
+    layout = world.window.to_occupancy()
+    window = GridMap(layout.data.reshape(layout.height, layout.width), layout.resolution,
+                     layout.origin_xy, unknown_is_occupied=False)
+    memory.update(window, now=0.0)
+    path = detour(memory.fused(1.0), robot, start, goal)
+    assert path[:, 1].max() > 2.5  # through the top corridor
+    # seen free again: the blockage is forgotten and the short way comes back
+    window.data.setflags(write=True)
+    cleared = GridMap(np.where(window.data >= 65, 0, window.data).astype(np.int8),
+                      window.resolution, window.origin, unknown_is_occupied=False)
+    memory.update(cleared, now=2.0)
+    assert np.all(detour(memory.fused(3.0), robot, start, goal)[:, 1] < 1.5)
+
+
+def test_waypoints_in_a_wall_snap_to_the_nearest_free_pose():
+    from ecahd_core.collision import check_collision
+    from ecahd_core.footprint import make_footprint
+    from ecahd_core.navigation import snap_waypoints
+
+    grid, robot = two_corridor_map(), make_footprint("circle")
+    # (3, 1.2) is 0.3 m from the wall block above (y = 1.5): the 0.4 m circle overlaps it by
+    # 0.1 m; the nearest free position is 0.1 m lower, within the 0.2 m reach
+    plan = np.array([[0.5, 0.75], [3.0, 1.2], [5.5, 0.75]])
+    snapped, moved = snap_waypoints(grid, robot, plan)
+    assert moved == 1 and snapped[1, 1] <= 1.1 + 1e-9 and abs(snapped[1, 0] - 3.0) < 0.1
+    np.testing.assert_array_equal(snapped[[0, 2]], plan[[0, 2]])
+    assert check_collision(snapped[1:2], robot, grid).collision_free
+    deep = np.array([[0.5, 0.75], [3.0, 2.0]])  # inside the block: nothing free within reach
+    assert snap_waypoints(grid, robot, deep)[1] == 0
