@@ -48,7 +48,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 from rosbags.typesys import get_typestore
 
 from ecahd_core.bag_io import TYPESTORE, read_bag  # noqa: F401 (read_bag: re-exported here)
-from ecahd_core.errors import EcahdError, BagError
+from ecahd_core.errors import BagError
 from ecahd_ros.params import ParamSpec, declare_parameters
 from ecahd_ros.spin import spin_node
 

@@ -57,7 +57,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ecahd_core.errors import EcahdError, SimError
+from ecahd_core.errors import SimError
 from ecahd_core.footprint import Footprint, make_footprint
 from ecahd_core.maps import DEFAULT_RESOLUTION, GridMap, load_map
 from ecahd_core.scenario import Obstacle
@@ -69,8 +69,6 @@ ROBOT_HEIGHT = 0.5  # [m] z extent of the robot body
 ROBOT_Z = 0.5  # [m] height of the robot's centre (inside the walls' z range)
 FENCE_THICKNESS = 1.0  # [m] walls around the map bounds
 BISECTION_STEPS = 6  # advance-to-contact precision: sub-step length / 2**6
-D4RL_MAX_EPISODE_STEPS = 800  # maze2d-large's episode length
-D4RL_GOAL_RADIUS = 0.5  # [m] sparse reward 1 within this distance of the goal
 MAX_COMPOUND_SHAPES = 16  # children PyBullet keeps in one createCollisionShapeArray
 WALL_TILE = 2.0  # [m] wall boxes are grouped into bodies per tile of this size
 RAY_BATCH = 8192  # rays per rayTestBatch call (PyBullet refuses more than 16384)
@@ -689,67 +687,3 @@ class MazeSim:
 
     def __exit__(self, *exc) -> None:
         self.close()
-
-
-# ---------------------------------------------------------------------------------- episodes
-@dataclass(frozen=True)
-class EpisodeStatus:
-    """Bookkeeping after one control step of a D4RL maze2d-style episode.
-
-    Attributes:
-        step: control steps taken so far (1 after the first update).
-        reward: this step's sparse reward (1.0 within goal_radius of the goal, else 0.0).
-        total_reward: sum of rewards so far.
-        distance: [m] from the robot to the goal.
-        first_reach_step: the step that first earned a reward, None until then.
-        contact_steps: steps reported in contact.
-        done: the episode has used all its steps.
-    """
-
-    step: int
-    reward: float
-    total_reward: float
-    distance: float
-    first_reach_step: int | None
-    contact_steps: int
-    done: bool
-
-    @property
-    def reached(self) -> bool:
-        return self.first_reach_step is not None
-
-
-class EpisodeTracker:
-    """Counts a D4RL maze2d episode: at most ``max_steps`` control steps, reward 1 per step
-    within ``goal_radius`` [m] of the goal (D4RL's sparse reward, no early termination)."""
-
-    def __init__(self, goal_xy, *, max_steps: int = D4RL_MAX_EPISODE_STEPS,
-                 goal_radius: float = D4RL_GOAL_RADIUS) -> None:
-        goal = np.asarray(goal_xy, dtype=np.float64).reshape(-1)
-        if goal.shape != (2,) or not np.all(np.isfinite(goal)):
-            raise SimError(f"episode goal must be a finite (x, y), got {goal_xy!r}")
-        if not (isinstance(max_steps, (int, np.integer)) and max_steps > 0):
-            raise SimError(f"episode max_steps must be a positive integer, got {max_steps!r}")
-        if not (math.isfinite(goal_radius) and goal_radius > 0):
-            raise SimError(f"episode goal_radius must be > 0 m, got {goal_radius}")
-        self.goal = goal
-        self.max_steps = int(max_steps)
-        self.goal_radius = float(goal_radius)
-        self.status = EpisodeStatus(step=0, reward=0.0, total_reward=0.0, distance=math.inf,
-                                    first_reach_step=None, contact_steps=0, done=False)
-
-    def update(self, state: SimState) -> EpisodeStatus:
-        """Account for one control step that ended in ``state``; raises SimError once done."""
-        prev = self.status
-        if prev.done:
-            raise SimError(f"the episode is over after {self.max_steps} steps")
-        step = prev.step + 1
-        distance = float(math.hypot(state.x - self.goal[0], state.y - self.goal[1]))
-        reward = 1.0 if distance <= self.goal_radius else 0.0
-        first = prev.first_reach_step if prev.first_reach_step is not None else (
-            step if reward > 0 else None)
-        self.status = EpisodeStatus(step=step, reward=reward,
-                                    total_reward=prev.total_reward + reward, distance=distance, first_reach_step=first,
-                                    contact_steps=prev.contact_steps + int(state.in_contact),
-                                    done=step >= self.max_steps)
-        return self.status

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from ecahd_core.maps import FREE, OCCUPIED, GridMap, builtin_map, save_nav2_yaml
-from sim_bridge.sim import (EpisodeTracker, MazeSim, SimConfig, SimError, SimState,
+from sim_bridge.sim import (MazeSim, SimConfig, SimError,
                             wall_rectangles)
 
 TINY_SQUARE = "[[0.02, 0.02], [-0.02, 0.02], [-0.02, -0.02], [0.02, -0.02]]"  # 4 cm robot
@@ -237,28 +237,3 @@ def test_render_topdown_draws_walls_and_robot(sim_factory):
     assert tuple(img[100 - 10, 10]) == (64, 64, 64)  # (0.5, 0.5): wall
     assert tuple(img[100 - 30, 70]) == (255, 255, 255)  # (3.5, 1.5): free
 
-
-# ---------------------------------------------------------------------------------- episodes
-def _at(x: float, y: float, in_contact: bool = False) -> SimState:
-    return SimState(x=x, y=y, yaw=0.0, v=0.0, w=0.0, t=0.0, in_contact=in_contact, contact_count=0)
-
-
-def test_episode_tracker_counts_reward_steps_and_first_reach():
-    tracker = EpisodeTracker((3.0, 1.5), max_steps=6, goal_radius=0.5)
-    # distances to the goal 1.0, 0.6, 0.5 (counts: <= radius, as D4RL), 0.2, 0.7, 0.3
-    xs = [2.0, 2.4, 2.5, 2.8, 3.7, 3.3]
-    statuses = [tracker.update(_at(x, 1.5, in_contact=(i == 1))) for i, x in enumerate(xs)]
-    assert [s.reward for s in statuses] == [0.0, 0.0, 1.0, 1.0, 0.0, 1.0]
-    assert statuses[-1].total_reward == 3.0
-    assert [s.first_reach_step for s in statuses] == [None, None, 3, 3, 3, 3]
-    assert statuses[-1].contact_steps == 1 and statuses[-1].reached
-    assert [s.done for s in statuses] == [False] * 5 + [True]
-    with pytest.raises(SimError, match="over"):
-        tracker.update(_at(3.0, 1.5))
-
-
-def test_episode_tracker_defaults_follow_d4rl_maze2d():
-    tracker = EpisodeTracker((1.0, 1.0))
-    assert (tracker.max_steps, tracker.goal_radius) == (800, 0.5)
-    with pytest.raises(SimError):
-        EpisodeTracker((float("nan"), 1.0))

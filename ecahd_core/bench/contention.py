@@ -267,9 +267,7 @@ def _ratios(cells: list[Cell], ours: int) -> list[dict]:
 def _planners(settings: ContentionBenchSettings):
     """SparseDiffusion and HierarchicalPlanner (replan once) with the core's defaults, as
     ``ecahd plan`` and ``ecahd bench planning`` build them from the shipped models."""
-    import torch
-
-    from ecahd_core.cost import CostConfig
+    from ecahd_core.cost import CollisionCost
     from ecahd_core.footprint import make_footprint
     from ecahd_core.maps import load_map
     from ecahd_core.model_zoo import load_model
@@ -277,12 +275,11 @@ def _planners(settings: ContentionBenchSettings):
 
     grid = load_map(settings.map)
     fp = make_footprint(settings.robot)
-    cc = CostConfig()
-    cost = (cc.make_costmap(grid), torch.as_tensor(fp.points, dtype=torch.float32), cc)
+    cost = CollisionCost.build(grid, fp).as_tuple()
     sd = SparseDiffusion(load_model("sd", grid, footprint=fp),
                          SparseConfig(num_candidates=settings.candidates), cost=cost)
     hd = HierarchicalPlanner(sd, load_model("dd", grid, footprint=fp), costmap=cost[0],
-                             footprint_points=fp.points, cost_config=cc, dense=DenseConfig(),
+                             footprint_points=cost[1], cost_config=cost[2], dense=DenseConfig(),
                              replan="once")
     return grid, sd, hd
 

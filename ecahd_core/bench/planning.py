@@ -160,7 +160,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
     from tqdm import tqdm
 
     from ecahd_core.astar import AStarPlanner, clearance_for_footprint
-    from ecahd_core.cost import CostConfig
+    from ecahd_core.cost import CollisionCost, CostConfig
     from ecahd_core.footprint import make_footprint
     from ecahd_core.maps import load_map
     from ecahd_core.model_zoo import load_model
@@ -181,8 +181,8 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
 
     def run_cell(method, guidance, robot, cost_config=None, variant=""):
         fp = make_footprint(robot)
-        cc = cost_config or CostConfig(margin=settings.margin)
-        cost = (cc.make_costmap(grid), torch.as_tensor(fp.points, dtype=torch.float32), cc)
+        cost = CollisionCost.build(grid, fp, cost_config or CostConfig(margin=settings.margin)
+                                   ).as_tuple()
         gen = torch.Generator().manual_seed(settings.sample_seed)
         net = None
         if method == "astar":
@@ -203,8 +203,8 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                 plan_fn = lambda s, g: (sd.plan(s, g, generator=gen).waypoints, None)  # noqa: E731
             else:
                 hd = HierarchicalPlanner(sd, load_model("dd", grid, footprint=fp),
-                                         costmap=cost[0], footprint_points=fp.points,
-                                         cost_config=cc, dense=DenseConfig(
+                                         costmap=cost[0], footprint_points=cost[1],
+                                         cost_config=cost[2], dense=DenseConfig(
                                              c_th=settings.c_th, guidance=guidance,
                                              guidance_weight=settings.guidance_weight,
                                              guidance_space=settings.guidance_space,

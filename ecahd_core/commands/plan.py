@@ -205,7 +205,7 @@ def _plan_diffusion(args, grid, footprint, start, goal):
     import torch
 
     from ecahd_core.collision import densify
-    from ecahd_core.cost import CostConfig
+    from ecahd_core.cost import CollisionCost
     from ecahd_core.model_zoo import load_model
     from ecahd_core.planner import (DenseConfig, FullDiffusion, HierarchicalPlanner, SparseConfig,
                                     SparseDiffusion)
@@ -213,8 +213,7 @@ def _plan_diffusion(args, grid, footprint, start, goal):
     polish = {} if args.polish_steps is None else {"polish_steps": args.polish_steps}
     polish["keep_better"] = not args.no_keep_better
     guided = _guided(args)
-    cc = CostConfig()
-    cost = (cc.make_costmap(grid), torch.as_tensor(footprint.points, dtype=torch.float32), cc)
+    cost = CollisionCost.build(grid, footprint).as_tuple()
 
     def gen():
         return torch.Generator().manual_seed(args.seed)
@@ -240,7 +239,7 @@ def _plan_diffusion(args, grid, footprint, start, goal):
         return (plan.waypoints, plan.waypoints, others, {"sd": plan.time_ms, "total": plan.time_ms},
                 0, None, None, None)
     hd = HierarchicalPlanner(sd, load_model("dd", grid, path=args.dd_model, footprint=footprint),
-                             costmap=cost[0], footprint_points=footprint.points, cost_config=cc,
+                             costmap=cost[0], footprint_points=cost[1], cost_config=cost[2],
                              dense=DenseConfig(guidance=guided, **polish), replan=args.replan)
     hd.plan(start, goal, generator=gen())  # warm-up
     plan = hd.plan(start, goal, generator=gen())
