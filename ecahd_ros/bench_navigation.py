@@ -411,8 +411,13 @@ def benchmarks() -> dict:
     """Every ``ecahd bench`` benchmark: the core's, then navigation."""
     from ecahd_core.commands.bench import BENCHMARKS, Benchmark
 
+    from ecahd_ros import bench_control
+
     return {**BENCHMARKS,
-            "navigation": Benchmark(help=HELP, add_arguments=add_arguments, run=run)}
+            "navigation": Benchmark(help=HELP, add_arguments=add_arguments, run=run),
+            "control": Benchmark(help=bench_control.HELP,
+                                 add_arguments=bench_control.add_arguments,
+                                 run=bench_control.run)}
 
 
 def add_bench_arguments(parser: argparse.ArgumentParser) -> None:
