@@ -74,6 +74,7 @@ class DemoConfig:
     # cylinders
     obstacles: int = 0
     moving: int = 0
+    models: Path | None = None  # folder of <map name>_{sd,dd,fd}.pt (train-all --out-dir)
     domain_id: int | None = None  # None: derived from the process id
     # parameter overrides of the global_planner / local_refiner nodes (name -> value)
     planner_params: dict = field(default_factory=dict)
@@ -110,7 +111,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--episodes", type=int, default=3, help="goals to drive to")
     p.add_argument("--robot", default="circle",
                    help="footprint: circle | quadruped | humanoid | Nav2 polygon '[[x, y], ...]'")
-    p.add_argument("--map", default="maze2d-large", help="built-in maze with shipped models")
+    p.add_argument("--map", default="maze2d-large",
+                   help="built-in maze or Nav2 map YAML (models: shipped, or --models)")
+    p.add_argument("--models", default=None, metavar="DIR",
+                   help="folder of <map name>_{sd,dd,fd}.pt, as `ecahd train-all --out-dir` "
+                        "writes them")
+    p.add_argument("--method", choices=("sd", "astar", "fd"), default="sd",
+                   help="global planner (astar needs no model)")
+    p.add_argument("--no-dd", action="store_true",
+                   help="local_refiner without Dense Diffusion (no DD model needed)")
     p.add_argument("--seed", type=int, default=0, help="seed of the goals and the samplers")
     p.add_argument("--out", default=None, help="output folder (default runs/demo-<timestamp>)")
     p.add_argument("--realtime-factor", type=float, default=1.0,
@@ -134,14 +143,23 @@ def add_obstacle_arguments(p: argparse.ArgumentParser) -> None:
 
 def _node_parameters(config: DemoConfig, start) -> dict[str, dict]:
     """Each node's parameters (name -> value) for its params file."""
-    common = {"map_name": config.map, "robot": config.robot, "seed": config.seed,
+    from ecahd_core.maps import load_map
+
+    name = load_map(config.map).name  # what the models were trained for
+    common = {"map_name": name, "robot": config.robot, "seed": config.seed,
               "use_sim_time": True}
+    models = {}
+    if config.models is not None:
+        models = {f"{kind}_model": str(config.models / f"{name}_{kind}.pt")
+                  for kind in ("sd", "fd", "dd")}
     return {
         "sim_bridge": {"map": config.map, "robot": config.robot, "start_x": float(start[0]),
                        "start_y": float(start[1]),
                        "realtime_factor": float(config.realtime_factor)},
-        "global_planner": {**common, **config.planner_params},
-        "local_refiner": {**common, **config.refiner_params},
+        "global_planner": {**common, **{k: v for k, v in models.items() if k != "dd_model"},
+                           **config.planner_params},
+        "local_refiner": {**common, **{k: v for k, v in models.items() if k == "dd_model"},
+                          **config.refiner_params},
     }
 
 
@@ -428,7 +446,10 @@ def run(args: argparse.Namespace) -> int:
                         seed=args.seed, realtime_factor=args.realtime_factor,
                         max_steps=args.max_steps, hold_steps=args.hold_steps,
                         domain_id=args.domain_id, obstacles=args.obstacles,
-                        moving=args.moving)
+                        moving=args.moving,
+                        models=Path(args.models) if args.models else None,
+                        planner_params={"method": args.method},
+                        refiner_params={"dd_enabled": not args.no_dd})
     result = run_demo(config)
     print(result.table)
     print(f"episodes: {result.wall_s:.1f} s wall, {result.sim_s:.1f} s sim time; bag "

@@ -221,8 +221,7 @@ class GlobalPlanner(Node):
         self.create_subscription(PoseStamped, "goal_pose", self._guard(self._on_goal),
                                  STREAM_QOS)
         self.create_subscription(Odometry, "odom", self._guard(self._on_odom), STREAM_QOS)
-        self.create_subscription(OccupancyGrid, "local_costmap",
-                                 self._guard(self._on_local_costmap), VIZ_QOS)
+        pass
         self.create_subscription(String, "ecahd/replan", self._guard(self._on_replan),
                                  STREAM_QOS)
         self.memory = None  # ecahd_core.sensing.ObstacleMemory of the scanned obstacles
@@ -278,7 +277,7 @@ class GlobalPlanner(Node):
         elif p.method == "astar":
             from ecahd_core.astar import AStarPlanner, clearance_for_footprint
 
-            astar = AStarPlanner(grid, clearance_for_footprint(self.footprint))
+            astar = AStarPlanner(grid, clearance_for_footprint(self.judged))
         else:
             fd = self._build_fd(grid)
         self.grid, self.sparse, self.astar, self.fd = grid, sparse, astar, fd
@@ -473,7 +472,7 @@ class GlobalPlanner(Node):
                  self.grid] if self.memory is not None else [self.grid]
         for i, grid in enumerate(grids):
             try:
-                path = detour(grid, self.footprint, start, goal)
+                path = detour(grid, self.judged, start, goal)
                 break
             except PlanningError:
                 if i == len(grids) - 1:
