@@ -27,7 +27,8 @@ zero commanded velocity (the refiner reached the goal) for ``hold_steps`` Table 
 episode. The episode reward therefore counts the steps within 0.5 m until the episode ends.
 
 Goal -> plan latency: per episode, the wall time (``time.perf_counter``) from publishing the
-goal to the demo node receiving the first ``plan`` that ends at that goal (None if none came
+goal to the demo node receiving the first ``plan`` that ends at that goal (within the 0.2 m a
+goal the footprint cannot reach exactly is snapped by) (None if none came
 before the episode ended), across processes; in DemoResult and metrics.json as
 ``goal_to_plan_ms``.
 
@@ -286,6 +287,7 @@ def run_demo(config: DemoConfig) -> DemoResult:
 
     from ecahd_core.errors import EcahdError
     from ecahd_core.evaluation import CONTROL_PERIOD, CONTROL_STAGE
+    from ecahd_core.navigation import SNAP_DISTANCE
     from ecahd_ros.bag_recorder import BagRecorder
     from ecahd_ros.eval_bag import evaluate_bag, write_outputs
     from ecahd_ros.qos import PLAN_QOS, STREAM_QOS
@@ -334,7 +336,9 @@ def run_demo(config: DemoConfig) -> DemoResult:
             if latency["goal"] is None or latency["ms"] is not None or not msg.poses:
                 return
             end = msg.poses[-1].pose.position
-            if math.hypot(end.x - latency["goal"][0], end.y - latency["goal"][1]) < 1e-6:
+            # a goal the footprint cannot reach exactly is snapped (at most SNAP_DISTANCE)
+            if math.hypot(end.x - latency["goal"][0],
+                          end.y - latency["goal"][1]) <= SNAP_DISTANCE + 1e-6:
                 latency["ms"] = (time.perf_counter() - latency["sent"]) * 1e3
 
         demo.create_subscription(Odometry, "odom", on_odom, STREAM_QOS)
