@@ -69,7 +69,8 @@ class DemoConfig:
     goal_radius: float = 0.5
     goals: tuple[tuple[float, float], ...] | None = None  # explicit goals; None: seeded problems
     start: tuple[float, float] | None = None  # explicit start; None: the first problem's
-    wall_timeout: float = 540.0  # [s] the whole episode loop
+    wall_timeout: float | None = None  # [s] the whole episode loop; None: every episode's
+    #   full length at the realtime factor, doubled, plus a minute
     # obstacles that are not on the map, per episode (ecahd_core.scenario.generate_scenario on
     # the leg previous goal -> goal, seeded by seed and the episode): static boxes, moving
     # cylinders
@@ -369,6 +370,8 @@ def run_demo(config: DemoConfig) -> DemoResult:
         log.info("graph ready in %.1f s (domain %d, one process per node); %d episodes",
                  time.monotonic() - t0, domain, len(goals))
 
+        wall_timeout = config.wall_timeout or (
+            2.0 * len(goals) * config.max_steps * CONTROL_PERIOD / config.realtime_factor + 60.0)
         wall0, sim0 = time.monotonic(), state["odom"][2]
         sim_params = None
         if scenarios is not None:
@@ -410,9 +413,8 @@ def run_demo(config: DemoConfig) -> DemoResult:
                 if steps >= config.max_steps - 1e-9:
                     log.info("episode %d: %d steps without reaching", i, config.max_steps)
                     break
-                if time.monotonic() - wall0 > config.wall_timeout:
-                    raise EcahdError(f"the episodes took over {config.wall_timeout:g} s wall "
-                                     "time")
+                if time.monotonic() - wall0 > wall_timeout:
+                    raise EcahdError(f"the episodes took over {wall_timeout:g} s wall time")
             goal_to_plan.append(latency["ms"])
             if latency["ms"] is None:
                 log.warning("episode %d: no plan to the goal arrived", i)
