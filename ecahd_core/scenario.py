@@ -303,16 +303,18 @@ class GeneratedScenario:
 
 
 def generate_scenario(grid, footprint, stops, *, static: int, moving: int, seed: int,
-                      keep_clear: float = 1.2, spacing: float = 1.0,
-                      tries: int = 60) -> GeneratedScenario:
+                      keep_clear: float = 1.2, spacing: float = 1.0, tries: int = 60,
+                      strict: bool = True) -> GeneratedScenario:
     """Obstacles on the route a robot drives: ``stops`` (K, 2) [m] are the start then the goals
     of the episodes in order. Static boxes (0.3-0.5 m sides) are dropped near the A* route
     (clearance of ``footprint``) and kept only if every goal stays reachable for the footprint
     with all of them in place (A* with clearance on the rasterised map); moving cylinders
     (radius 0.15-0.2 m, 0.3-0.5 m/s) cross the route at right angles, from wall to wall (at
     most 1.5 m each side). Nothing within ``keep_clear`` m of a stop, obstacles at least
-    ``spacing`` m apart (their paths' midpoints for moving ones). Raises ScenarioError when
-    the requested number cannot be placed in ``tries`` attempts each.
+    ``spacing`` m apart (their paths' midpoints for moving ones). When an obstacle cannot be
+    placed in ``tries`` attempts: ScenarioError if ``strict``, else the scenario keeps the
+    ones placed so far of that kind (1 m maze corridors rarely take 5 blocking boxes that all
+    leave a detour).
 
     Returns a GeneratedScenario (the same for the same inputs and seed)."""
     from ecahd_core.astar import AStarPlanner, clearance_for_footprint, path_length, \
@@ -368,8 +370,10 @@ def generate_scenario(grid, footprint, stops, *, static: int, moving: int, seed:
                 kinds.append("blocking" if longer > 0.5 else "narrowing")
                 break
         else:
-            raise ScenarioError(f"could not place static obstacle {len(obstacles) + 1} of "
-                                f"{static} keeping every goal reachable")
+            if strict:
+                raise ScenarioError(f"could not place static obstacle {len(obstacles) + 1} of "
+                                    f"{static} keeping every goal reachable")
+            break
     for _ in range(moving):
         for _attempt in range(tries):
             i = int(rng.integers(len(candidates)))
@@ -395,8 +399,10 @@ def generate_scenario(grid, footprint, stops, *, static: int, moving: int, seed:
             kinds.append("moving")
             break
         else:
-            raise ScenarioError(f"could not place moving obstacle {len(kinds) - static + 1} "
-                                f"of {moving} across the route")
+            if strict:
+                raise ScenarioError(f"could not place moving obstacle "
+                                    f"{kinds.count('moving') + 1} of {moving} across the route")
+            break
     return GeneratedScenario(tuple(obstacles), tuple(kinds), route)
 
 

@@ -266,9 +266,10 @@ def _scenarios(config: DemoConfig, start, goals) -> list[Path] | None:
         try:
             scenario = generate_scenario(grid, footprint, [previous, goal],
                                          static=config.obstacles, moving=config.moving,
-                                         seed=config.seed * 1000 + i)
+                                         seed=config.seed * 1000 + i, strict=False)
             obstacles = scenario.obstacles
-            log.info("episode %d: obstacles %s", i, ", ".join(scenario.kinds))
+            log.info("episode %d: %d of %d obstacles placed: %s", i, len(obstacles),
+                     config.obstacles + config.moving, ", ".join(scenario.kinds) or "none")
         except ScenarioError as exc:  # e.g. a leg too short to hold them: none this episode
             obstacles = ()
             log.warning("episode %d: no obstacles (%s)", i, exc)
