@@ -310,7 +310,7 @@ def generate_scenario(grid, footprint, stops, *, static: int, moving: int, seed:
     (clearance of ``footprint``) and kept only if every goal stays reachable for the footprint
     with all of them in place (A* with clearance on the rasterised map); moving cylinders
     (radius 0.15-0.2 m, 0.3-0.5 m/s) cross the route at right angles, from wall to wall (at
-    most 1.5 m each side). Nothing within ``keep_clear`` m of a stop, obstacles at least
+    most 1.5 m each side), and only where the robot can get by at one end of their run. Nothing within ``keep_clear`` m of a stop, obstacles at least
     ``spacing`` m apart (their paths' midpoints for moving ones). When an obstacle cannot be
     placed in ``tries`` attempts: ScenarioError if ``strict``, else the scenario keeps the
     ones placed so far of that kind (1 m maze corridors rarely take 5 blocking boxes that all
@@ -391,6 +391,13 @@ def generate_scenario(grid, footprint, stops, *, static: int, moving: int, seed:
                     d += 0.05
                 ends.append(candidates[i] + sign * d * normal)
             if np.linalg.norm(ends[0] - ends[1]) < 0.6:
+                continue
+            # it must let the robot by at one end of its run at least: a cylinder shuttling
+            # across a corridor no wider than the robot plus itself blocks it for good
+            statics = [o for o in obstacles if not o.moving]
+            if not any(route_on(rasterize(grid, [*statics, Obstacle(
+                    "cylinder", float(end[0]), float(end[1]), radius=radius)])) is not None
+                       for end in ends):
                 continue
             obstacles.append(Obstacle("cylinder", float(ends[0][0]), float(ends[0][1]),
                                       radius=radius,
