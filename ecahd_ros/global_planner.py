@@ -221,7 +221,8 @@ class GlobalPlanner(Node):
         self.create_subscription(PoseStamped, "goal_pose", self._guard(self._on_goal),
                                  STREAM_QOS)
         self.create_subscription(Odometry, "odom", self._guard(self._on_odom), STREAM_QOS)
-        pass
+        self.create_subscription(OccupancyGrid, "local_costmap",
+                                 self._guard(self._on_local_costmap), VIZ_QOS)
         self.create_subscription(String, "ecahd/replan", self._guard(self._on_replan),
                                  STREAM_QOS)
         self.memory = None  # ecahd_core.sensing.ObstacleMemory of the scanned obstacles
@@ -479,9 +480,11 @@ class GlobalPlanner(Node):
                     raise
         path = resample(path, ASTAR_SPACING)
         self.fallbacks += 1
+        remembered = int(self.memory.mask(now).sum()) if self.memory is not None else 0
         self.get_logger().warning(
             f"replan after {self.runner.blocked_count} blocked segment(s): fallback to A* on "
-            f"the map fused with the local costmap ({self.fallbacks} fallback(s) so far)")
+            f"the map with {remembered} remembered obstacle cells, tried {i + 1} of "
+            f"{len(grids)} maps ({self.fallbacks} fallback(s) so far)")
         return path, (time.perf_counter() - t0) * 1e3
 
     def _plan_astar(self, start: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, float]:

@@ -288,3 +288,43 @@ def test_bad_method_node_raises_at_construction(ros_context):
     with pytest.raises(EcahdError, match="parameter method must be one of"):
         GlobalPlanner(context=ros_context, parameter_overrides=[
             Parameter("method", value="rrt")])
+
+
+def test_a_blockage_the_refiner_scanned_is_avoided_by_the_fallback(rig):
+    """The refiner's local costmap marks a box wall to wall across the y = 5.5 corridor at
+    x = 3.5; after two 'blocked' replan requests the planner falls back to A* on the map with
+    that remembered, and the detour leaves the corridor (the direct way stays on y ~ 5.5)."""
+    import json
+
+    from ecahd_core.maps import OccupancyGridLayout
+    from ecahd_ros.conversions import layout_to_msg
+    from ecahd_ros.qos import STREAM_QOS, VIZ_QOS
+
+    r = rig()
+    costmap_pub = r.probe.create_publisher(OccupancyGrid, "local_costmap", VIZ_QOS)
+    replan_pub = r.probe.create_publisher(String, "ecahd/replan", STREAM_QOS)
+    r.send_map()
+    start, goal = (1.5, 5.5), (5.5, 5.5)  # both in the corridor y in [5, 6]
+    r.send_odom(start)
+    r.spin_until(lambda: r.planner.ready and r.planner.pose is not None)
+    r.send_goal(goal)
+    r.spin_until(lambda: r.plans)
+    # a 2 x 2 m window (0.1 m cells) from (2.5, 4.5): column x in [3.5, 3.6] marked for y in
+    # [5.0, 6.0] (rows 5..14), everything else seen free
+    data = np.zeros((20, 20), dtype=np.int8)
+    data[5:15, 10] = 100
+    window = layout_to_msg(OccupancyGridLayout(data=data.reshape(-1), width=20, height=20,
+                                               resolution=0.1, origin_xy=(2.5, 4.5)))
+    r._matched(costmap_pub, window)
+    r.spin_until(lambda: r.planner.memory is not None
+                 and r.planner.memory.mask(r.planner._now()).any())
+    for _ in range(2):  # SD with J over the remembered box first, then the A* fallback
+        n = len(r.plans)
+        r._matched(replan_pub, String(data=json.dumps({"reason": "blocked"})))
+        r.spin_until(lambda: len(r.plans) > n)
+    r.spin_until(lambda: any(json.loads(m.data)["stage"] == "fallback_astar"
+                             for m in r.timings))  # its record follows the plan
+    assert r.planner.fallbacks == 1
+    path = path_to_xy(r.plans[-1])
+    assert np.allclose(path[0], start) and np.allclose(path[-1], goal)
+    assert np.abs(path[:, 1] - 5.5).max() > 1.0  # round the block through another corridor
