@@ -54,6 +54,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -126,6 +127,7 @@ PARAMETERS = [
                                              "the robot"),
     *shared("seed", "torch_threads"),
 ]
+POSE_HISTORY = 1.0  # [s] of odometry poses kept to place scans by their stamps
 DYNAMIC = ("max_v", "max_w", "max_accel", "lookahead", "waypoint_tolerance", "goal_tolerance",
            "stale_timeout", "plan_timeout")
 
@@ -266,6 +268,7 @@ class LocalRefiner(Node):
         self.planner = None  # HierarchicalPlanner (its local stage only) once a map arrives
         self._lock = threading.Lock()  # the runner is shared by the callback threads
         self.runner = LocalRunner(p.runner_config())
+        self._poses: deque = deque()  # (odometry stamp [s], (x, y, yaw)) of the last second
         self.world = None  # ecahd_core.sensing.LocalWorld once a map arrives (use_scan)
         self.refiner = None  # ecahd_core.navigation.SegmentRefiner once a map arrives
         self.monitor = None
@@ -398,6 +401,19 @@ class LocalRefiner(Node):
                 self.runner.set_pose(xyyaw, self._now())
             except EcahdError as exc:
                 raise EcahdError(f"odometry ignored: {exc}") from None
+        # the poses of the last second by their stamps: a scan is placed with the pose at its
+        # own stamp (there is no TF here), not the latest one the robot has moved on from
+        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        self._poses.append((stamp, self.runner.pose))
+        while len(self._poses) > 2 and self._poses[-1][0] - self._poses[0][0] > POSE_HISTORY:
+            self._poses.popleft()
+
+    def _pose_at(self, stamp: float):
+        """The odometry pose whose stamp is nearest ``stamp`` [s] (the latest if none)."""
+        poses = list(self._poses)
+        if not poses:
+            return self.runner.pose
+        return min(poses, key=lambda sp: abs(sp[0] - stamp))[1]
 
     def _on_scan(self, msg: LaserScan) -> None:
         """Fuse the scan into the local costmap; re-judge the followed and prepared local plans
@@ -413,8 +429,7 @@ class LocalRefiner(Node):
                         range_max=msg.range_max, stamp=stamp)
         except EcahdError as exc:
             raise EcahdError(f"scan ignored: {exc}") from None
-        with self._lock:
-            pose = self.runner.pose
+        pose = self._pose_at(stamp)
         self.world.add_scan(pose, scan)
         self.counters["scans"] += 1
         if not (self.params.scan_in_plans and self.world.stale):
@@ -506,7 +521,8 @@ class LocalRefiner(Node):
 
 
 def main(args=None) -> None:
-    spin_node(LocalRefiner, args, name="local_refiner", threads=3)
+    # one executor thread: the local stage has its own worker (see ecahd_ros.spin)
+    spin_node(LocalRefiner, args, name="local_refiner")
 
 
 if __name__ == "__main__":
