@@ -10,8 +10,8 @@
   ``spin_once`` (e.g. its time source given a ``/clock`` with a negative time); :func:`spin_forever`
   logs it (each distinct message at most once per :data:`ERROR_LOG_PERIOD`) and keeps spinning.
   Only Ctrl-C and an external shutdown end the loop.
-- **One executor thread.** ``threads`` > 1 spins a MultiThreadedExecutor, but rclpy's (Jazzy)
-  busy-spins its wait loop while a mutually exclusive callback group is busy and starves every
+- **One executor thread.** rclpy's (Jazzy) MultiThreadedExecutor busy-spins its wait loop
+  while a mutually exclusive callback group is busy and starves every
   other Python thread of the GIL: measured with ``ecahd bench control``, local_refiner on 3
   executor threads got 58-101 of 300 control ticks in 15 s (gaps of 1-2 s, DD taking 3x its
   time); on one executor thread, with the local stage on its own worker thread, 304 of 300 and
@@ -24,8 +24,7 @@ import time
 from collections.abc import Callable
 
 import rclpy
-from rclpy.executors import (ExternalShutdownException, MultiThreadedExecutor,
-                             SingleThreadedExecutor)
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
 from ecahd_core.errors import EcahdError
@@ -51,8 +50,7 @@ def spin_forever(executor, logger, *, period: float = 0.1) -> None:
                 logger.error(f"exception while spinning (ignored, node keeps running): {text}")
 
 
-def spin_node(make_node: Callable[[], Node], args=None, *, name: str = "node",
-              threads: int = 1) -> None:
+def spin_node(make_node: Callable[[], Node], args=None, *, name: str = "node") -> None:
     """Create the node after ``rclpy.init`` and spin it until interrupted; ``destroy_node`` runs
     in every case (nodes release their resources, e.g. close a bag, there). A node that cannot
     configure exits with :data:`CONFIGURE_EXIT_CODE` and one line naming the reason."""
@@ -66,8 +64,7 @@ def spin_node(make_node: Callable[[], Node], args=None, *, name: str = "node",
     except KeyboardInterrupt:
         rclpy.try_shutdown()
         return
-    executor = MultiThreadedExecutor(num_threads=threads) if threads > 1 else \
-        SingleThreadedExecutor()
+    executor = SingleThreadedExecutor()
     executor.add_node(node)
     try:
         spin_forever(executor, node.get_logger())
