@@ -24,7 +24,7 @@ from sim_bridge.node import SimBridge  # noqa: E402
 # maze2d-large: the corridor y in [5, 6] is free for x in [1, 7]
 START, GOAL = (1.5, 5.5), (5.5, 5.5)
 REALTIME_FACTOR = 4.0
-WALL_LIMIT = 25.0  # [s] the whole test's spinning
+WALL_LIMIT = 60.0  # [s] the whole test's spinning (25 s was flaky on a loaded 2-core CI machine)
 
 
 class Graph:
