@@ -685,10 +685,16 @@ def test_malformed_input_to_planner_and_refiner(ros_context, capfd, tmp_path):
             ("value 127", map_msg(data=[127] * len(data)))], both)
         # rclpy's time source raises on a negative /clock: spin_forever logs it once
         mark = logs.mark()
-        publish("clock", Clock(clock=Time(sec=-5, nanosec=0)))
-        wait_for(lambda: "exception while spinning" in logs.read()[mark:], "the clock error")
+        # (re-published like bad_messages: DDS here loses a message now and then)
+        sent, deadline = 0, time.monotonic() + 10.0
+        while "exception while spinning" not in logs.read()[mark:]:
+            assert time.monotonic() < deadline, "not within 10 s: the clock error"
+            if sent < 5 and (sent == 0 or time.monotonic() > last + 1.0):
+                publish("clock", Clock(clock=Time(sec=-5, nanosec=0)))
+                sent, last = sent + 1, time.monotonic()
+            time.sleep(0.01)
         time.sleep(0.2)
-        assert logs.read()[mark:].count("exception while spinning") == 1
+        assert 1 <= logs.read()[mark:].count("exception while spinning") <= sent
         assert planner.get_clock().now().nanoseconds > 100e9  # the valid clock goes on
 
         # valid input again: a 10 000-pose plan is followed, a goal is planned and followed
