@@ -59,6 +59,9 @@ MAZE_LAYOUTS: dict[str, tuple[str, ...]] = {
 }
 MAZE_CELL_SIZE = 1.0  # [m] size of one maze character
 DEFAULT_RESOLUTION = 0.1  # [m/cell] fine grid used for A*, cost maps and collision checks
+# the largest grid the package plans on: 4000 x 4000 cells (60 x 60 m at 0.015 m/cell, 200 x 200 m
+# at 0.05); its float64 cost map alone takes 128 MB. Larger maps: coarser resolution or a crop.
+MAX_MAP_CELLS = 16_000_000
 
 
 @dataclass(frozen=True)
@@ -88,6 +91,10 @@ class GridMap:
         if data.ndim != 2 or data.shape[0] < 1 or data.shape[1] < 1:
             raise MapError(f"map {self.name!r}: occupancy data must be a non-empty 2-D array, "
                            f"got shape {data.shape}")
+        if data.size > MAX_MAP_CELLS:
+            raise MapError(f"map {self.name!r}: {data.shape[1]} x {data.shape[0]} cells is over "
+                           f"the size limit of {MAX_MAP_CELLS:,} cells; save it at a coarser "
+                           f"resolution or crop it")
         if not np.issubdtype(data.dtype, np.integer):
             raise MapError(f"map {self.name!r}: occupancy data must be integers, got {data.dtype}")
         if data.min() < -1 or data.max() > 100:

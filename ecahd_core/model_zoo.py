@@ -2,7 +2,9 @@
 from, the identity recorded in a checkpoint, and loading a model for a map and robot.
 
 Shipped models live in ``ecahd_core/models/<map>_<kind>.pt`` (inference-only checkpoints) and
-are reproduced from scratch by ``ecahd train-all --map <map>`` (seeded).
+are reproduced from scratch by ``ecahd train-all --map <map>`` (seeded). Models trained for your
+own map may live elsewhere: every folder named in the environment variable ``ECAHD_MODELS``
+(separated by ``:``) is searched before the package's folder (:func:`model_search_path`).
 
 Kinds (paper Sec. III-B, IV-A):
 - ``sd``  Sparse Diffusion: global paths of 2..P^g = 10 waypoints, start and goal inpainted.
@@ -24,6 +26,7 @@ from ecahd_core.errors import CheckpointError
 log = logging.getLogger(__name__)
 
 MODELS_DIR = Path(__file__).resolve().parent / "models"
+MODELS_ENV = "ECAHD_MODELS"
 KINDS = ("sd", "dd", "fd")
 
 
@@ -136,9 +139,23 @@ def model_meta(kind: str, dataset) -> dict[str, Any]:
     }
 
 
+def model_search_path() -> list[Path]:
+    """Folders searched for ``<map>_<kind>.pt``, first match wins: those named in
+    ``$ECAHD_MODELS`` (``:``-separated, in order), then the package's own folder."""
+    import os
+
+    extra = [Path(d).expanduser() for d in os.environ.get(MODELS_ENV, "").split(os.pathsep) if d]
+    return extra + [MODELS_DIR]
+
+
 def shipped_path(map_name: str, kind: str) -> Path:
-    """Where the package keeps the model of ``kind`` for ``map_name``."""
-    return MODELS_DIR / f"{map_name}_{kind}.pt"
+    """Where the model of ``kind`` for ``map_name`` is found on :func:`model_search_path`
+    (the package's own folder when no folder has it)."""
+    name = f"{map_name}_{kind}.pt"
+    for folder in model_search_path():
+        if (folder / name).is_file():
+            return folder / name
+    return MODELS_DIR / name
 
 
 def check_model(kind: str, map_name: str, *, path: str | Path | None = None, footprint=None,
@@ -187,9 +204,12 @@ def load_model(kind: str, grid, *, path: str | Path | None = None, footprint=Non
 
 
 def _check_shipped(kind: str, map_name: str, path) -> None:
-    shipped = sorted(p.stem for p in MODELS_DIR.glob("*.pt"))
-    raise CheckpointError(f"no shipped {kind!r} model for map {map_name!r} at '{path}' "
-                          f"(shipped: {shipped}); train one with `ecahd train-all --map ...`")
+    folders = model_search_path()
+    known = sorted({p.stem for d in folders if d.is_dir() for p in d.glob("*.pt")})
+    raise CheckpointError(
+        f"no {kind!r} model for map {map_name!r} ({path.name} in none of "
+        f"{[str(d) for d in folders]}; found: {known}); train one with `ecahd train-all --map "
+        f"...` and put its --out-dir on ${MODELS_ENV}")
 
 
 def _read_checkpoint(kind: str, grid, path, *, fingerprint: bool = True, device: str = "cpu"):

@@ -44,6 +44,15 @@ class SparseConfig:
         guidance: guide SD itself by J towards G (the "SD with guidance" baseline of Table I;
             ECAHD leaves SD unguided).
         guidance_weight: omega when ``guidance``.
+        max_spacing: [m] waypoint spacing by distance (ours, beyond the paper; None: off, the
+            paper's fixed P^g). After the best of N is chosen, every leg longer than this is
+            re-sampled by SD itself between its two waypoints (start and goal of the leg
+            inpainted, best of N again, one batch per horizon) with
+            ceil(length / max_spacing) + 1 <= P^g waypoints, up to ``densify_rounds`` times,
+            so a long plan on a big map keeps its waypoints a few metres apart and each local
+            segment stays within what DD learnt. The plan then has more than ``horizon``
+            waypoints.
+        densify_rounds: rounds of that re-sampling (a leg may still be long after the last).
         warm_fraction: warm-started re-planning (ours, beyond the paper): a re-plan
             (:meth:`SparseDiffusion.replan`; HierarchicalPlanner's ``every_waypoint`` loop) starts
             from the rest of the previous plan, noised to the DDIM step where the last
@@ -62,9 +71,17 @@ class SparseConfig:
     guidance: bool = False
     guidance_weight: float = 1.0
     guidance_space: str = "eps"
+    max_spacing: float | None = None
+    densify_rounds: int = 2
     warm_fraction: float = 0.0
 
     def __post_init__(self) -> None:
+        if self.max_spacing is not None and not (np.isfinite(self.max_spacing)
+                                                 and self.max_spacing > 0):
+            raise EcahdError(f"max_spacing must be None (off) or a finite number > 0 m, "
+                             f"got {self.max_spacing}")
+        if self.densify_rounds < 0:
+            raise EcahdError(f"densify_rounds must be >= 0, got {self.densify_rounds}")
         if not 0.0 <= self.warm_fraction <= 1.0:
             raise EcahdError(f"warm_fraction must lie in 0..1 (0: off), got {self.warm_fraction}")
         if self.selection not in SELECTION_RULES:
@@ -151,8 +168,10 @@ class SparseDiffusion:
 
     def plan(self, start, goal, *, horizon: int | None = None,
              generator: torch.Generator | None = None, warm_start=None,
-             warm_fraction: float | None = None) -> SparsePlan:
-        """start, goal: (2,) [m] -> SparsePlan with waypoints (horizon, 2) from start to goal.
+             warm_fraction: float | None = None, densify: bool = True) -> SparsePlan:
+        """start, goal: (2,) [m] -> SparsePlan with waypoints (horizon, 2) from start to goal
+        (more than ``horizon`` when ``config.max_spacing`` is set and ``densify``; see
+        :meth:`densify`).
 
         ``warm_start`` (horizon, 2) [m]: start the N candidates from this trajectory (its ends are
         replaced by start and goal) noised to the last ``warm_fraction`` of the DDIM schedule
@@ -200,11 +219,75 @@ class SparseDiffusion:
         best = select_best(cands_np, np.asarray(goal, dtype=np.float64), epsilon=cfg.epsilon,
                            rule=cfg.selection, collision_costs=col,
                            collision_tolerance=cfg.collision_tolerance)
-        return SparsePlan(waypoints=cands_np[best], candidates=cands_np, best=best,
+        waypoints = cands_np[best]
+        if densify and cfg.max_spacing is not None:
+            waypoints = self.densify(waypoints, generator=generator)
+        return SparsePlan(waypoints=waypoints, candidates=cands_np, best=best,
                           collision_costs=col, time_ms=(time.perf_counter() - t0) * 1e3)
 
+    def _candidates(self, starts: torch.Tensor, goals: torch.Tensor, horizon: int,
+                    generator: torch.Generator | None) -> np.ndarray:
+        """The best of N unguided SD samples for each of K legs, in one batch.
+        starts, goals: (K, 2) [m] -> (K, horizon, 2) [m] float64."""
+        cfg, K, N = self.config, starts.shape[0], self.config.num_candidates
+        a = starts.repeat_interleave(N, dim=0)  # (K*N, 2)
+        b = goals.repeat_interleave(N, dim=0)
+        cands = self.sampler.sample(batch=K * N, horizon=horizon, conditions={0: a, -1: b},
+                                    generator=generator).trajectories  # (K*N, h, 2)
+        col = None
+        if cfg.selection == "collision_aware":
+            from ecahd_core.cost import trajectory_cost
+
+            costmap, fp, cost_config = self.cost
+            with torch.no_grad():
+                col = trajectory_cost(cands.to(costmap.dtype), b.to(costmap.dtype), fp, costmap,
+                                      **cost_config.cost_kwargs()).collision_cost
+            col = col.cpu().numpy().reshape(K, N)
+        cands_np = cands.detach().cpu().numpy().astype(np.float64).reshape(K, N, horizon, 2)
+        goals_np = goals.cpu().numpy().astype(np.float64)
+        out = np.empty((K, horizon, 2))
+        for k in range(K):
+            best = select_best(cands_np[k], goals_np[k], epsilon=cfg.epsilon,
+                               rule=cfg.selection,
+                               collision_costs=None if col is None else col[k],
+                               collision_tolerance=cfg.collision_tolerance)
+            out[k] = cands_np[k, best]
+        return out
+
+    def densify(self, waypoints, *, generator: torch.Generator | None = None) -> np.ndarray:
+        """Waypoint spacing by distance (``config.max_spacing``, ours): every leg of
+        ``waypoints`` (P, 2) [m] longer than max_spacing is replaced by SD's best of N between
+        its two ends with ceil(length / max_spacing) + 1 (at most P^g) waypoints; legs of one
+        horizon are sampled in one batch; up to ``config.densify_rounds`` rounds.
+        Returns (P', 2) [m], P' >= P, with the same first and last waypoint."""
+        cfg = self.config
+        wp = np.asarray(waypoints, dtype=np.float64)
+        if cfg.max_spacing is None:
+            return wp
+        for _ in range(cfg.densify_rounds):
+            lengths = np.linalg.norm(np.diff(wp, axis=0), axis=-1)
+            want = np.minimum(cfg.horizon, np.ceil(lengths / cfg.max_spacing - 1e-9) + 1
+                              ).astype(int)
+            long = np.flatnonzero(want > 2)
+            if len(long) == 0:
+                break
+            legs: dict[int, np.ndarray] = {}
+            for h in np.unique(want[long]):
+                idx = long[want[long] == h]
+                legs.update(zip(idx.tolist(), self._candidates(
+                    torch.as_tensor(wp[idx], dtype=torch.float32),
+                    torch.as_tensor(wp[idx + 1], dtype=torch.float32), int(h), generator)))
+            pieces = [wp[:1]]
+            for k in range(len(wp) - 1):
+                leg = legs.get(k)
+                pieces.append(wp[k + 1:k + 2] if leg is None else leg[1:])
+            out = np.concatenate(pieces)
+            out[0], out[-1] = wp[0], wp[-1]  # exact ends (the model works in float32)
+            wp = out
+        return wp
+
     def replan(self, start, goal, previous=None, *, horizon: int | None = None,
-               generator: torch.Generator | None = None) -> SparsePlan:
+               generator: torch.Generator | None = None, densify: bool = True) -> SparsePlan:
         """Re-plan from ``start`` (2,) [m] to ``goal`` (2,) [m] while following ``previous``
         (P, 2) [m], the current plan (None: no plan yet).
 
@@ -220,7 +303,8 @@ class SparseDiffusion:
             if len(previous) >= horizon:
                 warm = previous[len(previous) - horizon:].copy()
                 warm[0] = np.asarray(start, dtype=np.float64).reshape(2)
-        return self.plan(start, goal, horizon=horizon, generator=generator, warm_start=warm)
+        return self.plan(start, goal, horizon=horizon, generator=generator, warm_start=warm,
+                         densify=densify)
 
 
 # ----------------------------------------------------------------------- Algorithms 1 and 2
@@ -327,6 +411,9 @@ class LocalStage:
 
 
 REPLAN_POLICIES = ("every_waypoint", "once")
+# every_waypoint with SparseConfig.max_spacing: iterations beyond P^g - 1 before the last one is
+# made to go straight to the goal
+MAX_EXTRA_ITERATIONS = 30
 
 
 class HierarchicalPlanner:
@@ -478,15 +565,22 @@ class HierarchicalPlanner:
         global_plans, segments, dd_used, costs, polished = [], [], [], [], []
         if self.replan == "once":
             return self._plan_once(S, G, generator, t_total)
-        for p in range(P_g - 1):  # Algorithm 1 line 1 (the last iteration reaches G)
+        # Algorithm 1 line 1: P^g - 1 iterations, the last one reaching G. With waypoint spacing
+        # by distance (SparseConfig.max_spacing) a plan may have more waypoints than its
+        # horizon: the iterations go on (horizon 2) until a plan is just (S, G), at most
+        # MAX_EXTRA_ITERATIONS more, after which the last one goes straight to G.
+        p = 0
+        while True:
             t0 = time.perf_counter()
+            forced = p >= P_g - 2 + MAX_EXTRA_ITERATIONS
             waypoints = self.sparse.replan(S.numpy(), G.numpy(),
                                            global_plans[-1] if global_plans else None,
-                                           horizon=P_g - p,
-                                           generator=generator).waypoints  # lines 2-12
+                                           horizon=max(2, P_g - p), generator=generator,
+                                           densify=not forced).waypoints  # lines 2-12
             times["sd"] += (time.perf_counter() - t0) * 1e3
+            last = len(waypoints) == 2
             wp = torch.as_tensor(waypoints, dtype=torch.float32)
-            stage = self.local_stage(wp[0], wp[1], end_fixed=p == P_g - 2,
+            stage = self.local_stage(wp[0], wp[1], end_fixed=last,
                                      generator=generator)  # lines 13-18
             for k, ms in stage.timings_ms.items():
                 times[k] += ms
@@ -498,6 +592,9 @@ class HierarchicalPlanner:
             polished.append(moved)
             costs.append((c, c_after))
             S = local[-1].clone()  # MoveAgent: the end of the local plan (t^g[1] unless polished)
+            p += 1
+            if last:
+                break
         traj = np.concatenate([segments[0]] + [s[1:] for s in segments[1:]])
         times["total"] = (time.perf_counter() - t_total) * 1e3
         return HierarchicalPlan(trajectory=traj, global_plans=global_plans, segments=segments,
@@ -554,7 +651,7 @@ class HierarchicalPlanner:
         traj = np.concatenate([segments[0]] + [sg[1:] for sg in segments[1:]])
         times["total"] = (time.perf_counter() - t_total) * 1e3
         return HierarchicalPlan(trajectory=traj,
-                                global_plans=[waypoints[p:] for p in range(P_g - 1)],
+                                global_plans=[waypoints[p:] for p in range(len(waypoints) - 1)],
                                 segments=segments, dd_segments=used.tolist(),
                                 local_costs=list(zip(c.tolist(), c_after.tolist())),
                                 timings_ms=times, polished=polished.tolist())

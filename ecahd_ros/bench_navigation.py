@@ -344,7 +344,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=d.seed, help="seed of the goals and samplers")
     p.add_argument("--robot", default=d.robot,
                    help="footprint: circle | quadruped | humanoid | Nav2 polygon '[[x, y], ...]'")
-    p.add_argument("--map", default=d.map, help="built-in maze with shipped models")
+    p.add_argument("--map", default=d.map,
+                   help="built-in maze or Nav2 map YAML; its models: shipped, or found "
+                        "through $ECAHD_MODELS (ecahd train-all --out-dir)")
     p.add_argument("--variants", nargs="+", choices=VARIANT_KEYS, default=None,
                    help="which columns to run (ecahd: w/ DD, ecahd-no-dd: w/o DD, astar: A* + "
                         "controller, fd: FD without a local planner; ecahd-blind: without "

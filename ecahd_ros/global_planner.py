@@ -95,6 +95,9 @@ PARAMETERS = [
     *shared("map_name"),
     ParamSpec("num_candidates", 10, "N, candidate global plans sampled in one batch"),
     ParamSpec("horizon", 10, "P^g, waypoints of the first global plan"),
+    ParamSpec("max_spacing", 0.0, "[m] sd: waypoint spacing by distance, legs of a plan longer "
+                                  "than this re-sampled by SD between their ends (for big "
+                                  "maps); 0 = off (the paper's fixed P^g)"),
     ParamSpec("ddim_steps", 0, "DDIM steps of SD or FD; 0 = the checkpoint's"),
     ParamSpec("epsilon", 1.0, "[m] goal-reaching radius of the best-of-N rule"),
     ParamSpec("selection", "collision_aware", f"best-of-N rule: {list(SELECTION_RULES)} "
@@ -124,6 +127,7 @@ class GlobalPlannerParams:
     map_name: str
     num_candidates: int
     horizon: int
+    max_spacing: float
     ddim_steps: int
     epsilon: float
     selection: str
@@ -143,7 +147,7 @@ class GlobalPlannerParams:
         require_positive(self, "num_candidates", "epsilon", "waypoint_tolerance",
                          "torch_threads")
         require_non_negative(self, "ddim_steps", "footprint_padding", "seed", "replan_timeout",
-                             "obstacle_memory", "clearance_margin")
+                             "obstacle_memory", "clearance_margin", "max_spacing")
         require(self.method in METHODS, "method", self.method, f"one of {list(METHODS)}")
         require(self.horizon >= 2, "horizon", self.horizon, ">= 2")
         require(self.selection in SELECTION_RULES, "selection", self.selection,
@@ -162,7 +166,8 @@ class GlobalPlannerParams:
     def sparse_config(self) -> SparseConfig:
         return SparseConfig(num_candidates=self.num_candidates, horizon=self.horizon,
                             epsilon=self.epsilon, selection=self.selection,
-                            num_steps=self.ddim_steps or None)
+                            num_steps=self.ddim_steps or None,
+                            max_spacing=self.max_spacing or None)
 
 
 def candidate_markers(plan: SparsePlan, frame_id: str, stamp) -> MarkerArray:
@@ -435,6 +440,11 @@ class GlobalPlanner(Node):
                 self.sparse.cost = saved
             waypoints, ms = result.waypoints.copy(), result.time_ms
             detail = f" (candidate {result.best} of {len(result.candidates)})"
+            if self._crosses_remembered(waypoints):  # SD cannot see round it: detour now
+                method, result = "fallback_astar", None
+                waypoints, ms_fallback = self._plan_fallback(start, goal)
+                ms += ms_fallback
+                detail = " (SD's best crossed an obstacle the scans found)"
         elif method == "astar":
             waypoints, ms = self._plan_astar(start, goal)
         else:
@@ -458,6 +468,23 @@ class GlobalPlanner(Node):
                                                 horizon=len(waypoints)))
         self.get_logger().info(f"{method} plan of {len(waypoints)} points to "
                                f"({goal[0]:.2f}, {goal[1]:.2f}) in {ms:.1f} ms{detail}")
+
+    def _crosses_remembered(self, waypoints: np.ndarray) -> bool:
+        """Whether the straight legs of ``waypoints`` (P, 2) [m] sweep the footprint over an
+        obstacle the scans found and the memory still holds (the static map's walls are DD's
+        and polishing's business; a scanned blockage is not in what SD learnt)."""
+        from ecahd_core.collision import check_collision
+        from ecahd_core.maps import GridMap
+
+        if self.memory is None:
+            return False
+        mask = self.memory.mask(self._now())
+        if not mask.any():
+            return False
+        g = self.grid
+        only = GridMap(np.where(mask, 100, 0).astype(np.int8), g.resolution, g.origin,
+                       name=g.name, frame_id=g.frame_id)
+        return not check_collision(waypoints, self.judged, only).collision_free
 
     def _plan_fallback(self, start: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, float]:
         """A* with the footprint's clearance on the static map fused with the local costmap

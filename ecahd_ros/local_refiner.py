@@ -13,6 +13,11 @@ tick only tracks the current local plan (bounded work, whatever the plan's lengt
 over the next one when the robot reaches its waypoint. With nothing safe to follow (not refined
 yet, or blocked) the command is zero velocity.
 
+A map's cost J, DD model and local costmap are built, and each scan is fused into the local
+costmap and the prepared plans re-judged, on two more worker threads (ecahd_core.worker; the
+newest map or scan wins over one still waiting), so neither a 2000 x 2000 map nor a scan
+fusion on it holds the control timer back.
+
 With ``dd_enabled`` false ("ECAHD w/o DD" of Table III, and the baselines' "no local planner")
 J is still evaluated on each straight plan (the timing records keep c_before), DD never runs and
 no DD model is loaded; the exact check still applies.
@@ -69,6 +74,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from ecahd_core.errors import EcahdError
 from ecahd_core.navigation import LocalRunner, LocalRunnerConfig, SegmentResult
 from ecahd_core.planner import DenseConfig
+from ecahd_core.worker import LatestWorker
 from ecahd_ros.conversions import (layout_to_msg, msg_to_grid, path_to_xy, timing_message,
                                    xy_to_path, yaw_from_quaternion)
 from ecahd_ros.params import (ParamSpec, declare_parameters, make_robot,
@@ -267,6 +273,13 @@ class LocalRefiner(Node):
         self.grid = None
         self.planner = None  # HierarchicalPlanner (its local stage only) once a map arrives
         self._lock = threading.Lock()  # the runner is shared by the callback threads
+        self._world_lock = threading.Lock()  # the local costmap: scan worker vs publisher
+        # long work off the executor thread (ecahd_core.worker): maps, scan fusion
+        report = lambda exc: self.get_logger().error(str(exc))  # noqa: E731 (_guard logs)
+        self._map_worker = LatestWorker(self._guard(self._build_world), name="map",
+                                        on_error=report)
+        self._scan_worker = LatestWorker(self._guard(self._fuse_scan), name="scan",
+                                         on_error=report)
         self.runner = LocalRunner(p.runner_config())
         self._poses: deque = deque()  # (odometry stamp [s], (x, y, yaw)) of the last second
         self.world = None  # ecahd_core.sensing.LocalWorld once a map arrives (use_scan)
@@ -342,16 +355,22 @@ class LocalRefiner(Node):
 
     # ------------------------------------------------------------------------- callbacks
     def _on_map(self, msg: OccupancyGrid) -> None:
+        """Validate the map here; build its cost J, DD and local costmap on the map worker
+        (seconds on a 2000 x 2000 map: the control timer keeps its rate meanwhile)."""
+        p = self.params
+        if msg.header.frame_id != p.global_frame:
+            raise EcahdError(f"map in frame {msg.header.frame_id!r} ignored: expected "
+                             f"{p.global_frame!r}")
+        self._map_worker.submit(msg_to_grid(msg, name=p.map_name))
+
+    def _build_world(self, grid) -> None:
+        """(map worker) Everything the local stage needs on ``grid``, swapped in at once."""
         from ecahd_core.cost import CollisionCost
         from ecahd_core.model_zoo import load_model
         from ecahd_core.navigation import SegmentRefiner
         from ecahd_core.planner import HierarchicalPlanner
 
         p = self.params
-        if msg.header.frame_id != p.global_frame:
-            raise EcahdError(f"map in frame {msg.header.frame_id!r} ignored: expected "
-                             f"{p.global_frame!r}")
-        grid = msg_to_grid(msg, name=p.map_name)
         ckpt = (load_model("dd", grid, path=p.dd_model or None, footprint=self.footprint,
                            horizon=self.points) if p.dd_enabled else None)
         cost = CollisionCost.build(grid, self.footprint)
@@ -368,7 +387,7 @@ class LocalRefiner(Node):
             from ecahd_core.sensing import LocalWorld
 
             world = LocalWorld(grid, cost, p.local_costmap_config(), offset=p.scan_offset)
-        with self._lock:
+        with self._lock, self._world_lock:
             self.grid, self.planner, self.refiner, self.world = grid, planner, refiner, world
             self.runner.refine = refiner
             self.runner.reset_costs()  # the current plan's segments are refined on this map
@@ -416,8 +435,8 @@ class LocalRefiner(Node):
         return min(poses, key=lambda sp: abs(sp[0] - stamp))[1]
 
     def _on_scan(self, msg: LaserScan) -> None:
-        """Fuse the scan into the local costmap; re-judge the followed and prepared local plans
-        on the fused map (a newly blocked one is refined again, guided by the fused J)."""
+        """Validate the scan and place it with the odometry pose at its stamp here; fuse it
+        on the scan worker (:meth:`_fuse_scan`)."""
         from ecahd_core.sensing import Scan
 
         if self.world is None or self.runner.pose is None:
@@ -429,13 +448,25 @@ class LocalRefiner(Node):
                         range_max=msg.range_max, stamp=stamp)
         except EcahdError as exc:
             raise EcahdError(f"scan ignored: {exc}") from None
-        pose = self._pose_at(stamp)
-        self.world.add_scan(pose, scan)
-        self.counters["scans"] += 1
-        if not (self.params.scan_in_plans and self.world.stale):
-            return
-        grid, costmap = self.world.fused()
+        self._scan_worker.submit((self._pose_at(stamp), scan))
+
+    def _fuse_scan(self, item) -> None:
+        """(scan worker) Fuse a scan into the local costmap; re-judge the followed and prepared
+        local plans on the fused map (a newly blocked one is refined again, guided by the
+        fused J). A scan that waited while another was fused is dropped for the newer one."""
+        pose, scan = item
+        with self._world_lock:
+            world = self.world
+            if world is None:
+                return
+            world.add_scan(pose, scan)
+            self.counters["scans"] += 1
+            if not (self.params.scan_in_plans and world.stale):
+                return
+            grid, costmap = world.fused()
         with self._lock:
+            if self.world is not world:  # a new map arrived meanwhile
+                return
             self.refiner.set_world(grid, costmap)
             invalid = self.runner.recheck(self.refiner.judge)
         if invalid:
@@ -444,9 +475,10 @@ class LocalRefiner(Node):
                                    "scanned obstacle: refining again")
 
     def _publish_costmap(self) -> None:
-        if self.world is None:
-            return
-        layout = self.world.window.to_occupancy(self.params.global_frame)
+        with self._world_lock:
+            if self.world is None:
+                return
+            layout = self.world.window.to_occupancy(self.params.global_frame)
         self._costmap_pub.publish(layout_to_msg(layout, self.get_clock().now().to_msg()))
 
     def _on_control(self) -> None:
@@ -516,6 +548,8 @@ class LocalRefiner(Node):
         self._cmd_pub.publish(msg)
 
     def destroy_node(self) -> None:
+        self._map_worker.close()
+        self._scan_worker.close()
         self.runner.close()
         super().destroy_node()
 

@@ -146,6 +146,8 @@ def test_gridmap_rejects_bad_fields():
         GridMap(data=np.zeros(4, np.int8), resolution=0.1)
     with pytest.raises(MapError, match="finite"):
         GridMap(data=np.zeros((2, 2), np.int8), resolution=0.1, origin=(np.nan, 0))
+    with pytest.raises(MapError, match="4001 x 4000 cells is over the size limit"):
+        GridMap(data=np.zeros((4000, 4001), np.int8), resolution=0.05)
 
 
 def test_no_free_cell():

@@ -88,7 +88,7 @@ def test_wrong_map_robot_horizon_raise(tiny_sd):
 
 
 def test_missing_or_corrupt_checkpoint(tmp_path):
-    with pytest.raises(CheckpointError, match="no shipped 'sd' model for map 'maze2d-umaze'"):
+    with pytest.raises(CheckpointError, match="no 'sd' model for map 'maze2d-umaze'"):
         load_model("sd", builtin_map("maze2d-umaze"))
     bad = tmp_path / "bad.pt"
     bad.write_bytes(b"not a checkpoint")
@@ -120,8 +120,28 @@ def test_train_all_tiny(tmp_path):
     # the whole recipe at a thousandth of its steps on the small maze: dataset + 3 models
     assert main(["train-all", "--map", "maze2d-umaze", "--pairs", "6", "--steps-scale", "0.001",
                  "--work-dir", str(tmp_path / "work"), "--out-dir", str(tmp_path / "models"),
-                 "--no-progress"]) == 0
+                 "--no-progress", "--kinds", "sd", "dd", "fd"]) == 0
     grid = builtin_map("maze2d-umaze")
     for kind in ("sd", "dd", "fd"):
         ckpt = load_model(kind, grid, path=tmp_path / "models" / f"maze2d-umaze_{kind}.pt")
         assert ckpt.training_state is None and ckpt.meta["dataset_pairs"] == 6
+
+
+def test_models_are_found_through_ecahd_models(tmp_path, monkeypatch):
+    from ecahd_core.model_zoo import MODELS_DIR, model_search_path, shipped_path
+
+    grid = builtin_map("maze2d-umaze")
+    monkeypatch.delenv("ECAHD_MODELS", raising=False)
+    with pytest.raises(CheckpointError, match="no 'sd' model for map 'maze2d-umaze'.*ECAHD_MODELS"):
+        load_model("sd", grid)
+    assert main(["train-all", "--map", "maze2d-umaze", "--pairs", "6", "--steps-scale", "0.001",
+                 "--work-dir", str(tmp_path / "work"), "--out-dir", str(tmp_path / "mine"),
+                 "--no-progress"]) == 0  # SD and DD by default
+    assert sorted(p.name for p in (tmp_path / "mine").iterdir()) == [
+        "maze2d-umaze_dd.pt", "maze2d-umaze_sd.pt"]
+    monkeypatch.setenv("ECAHD_MODELS", f"{tmp_path / 'empty'}:{tmp_path / 'mine'}")
+    assert model_search_path() == [tmp_path / "empty", tmp_path / "mine", MODELS_DIR]
+    assert shipped_path("maze2d-umaze", "sd") == tmp_path / "mine" / "maze2d-umaze_sd.pt"
+    assert load_model("sd", grid).meta["dataset_pairs"] == 6
+    # the package's own models stay found behind the others
+    assert shipped_path("maze2d-large", "sd") == MODELS_DIR / "maze2d-large_sd.pt"

@@ -152,3 +152,49 @@ def test_safety_net_with_the_planner_leaves_a_collision_free_plan_as_it_is():
     if safe.rule == "none":
         assert np.array_equal(safe.path, plan.trajectory)
     assert np.allclose(safe.path[0], [1.5, 1.5]) and np.allclose(safe.path[-1], [10.5, 7.5], atol=1e-5)
+
+
+def _cost_triple(robot="circle"):
+    fp = make_footprint(robot)
+    cc = CostConfig()
+    return fp, (cc.make_costmap(GRID), torch.as_tensor(fp.points, dtype=torch.float64), cc)
+
+
+def test_max_spacing_densifies_long_legs_and_keeps_the_ends():
+    fp, cost = _cost_triple()
+    ckpt = load_model("sd", GRID, footprint=fp)
+    start, goal = np.array([1.5, 1.5]), np.array([10.5, 7.5])
+    plain = SparseDiffusion(ckpt, SparseConfig(num_candidates=4, selection="collision_aware"),
+                            cost=cost).plan(start, goal, generator=torch.Generator().manual_seed(0))
+    assert plain.waypoints.shape == (10, 2)
+    sd = SparseDiffusion(ckpt, SparseConfig(num_candidates=4, selection="collision_aware",
+                                            max_spacing=0.5), cost=cost)
+    dense = sd.plan(start, goal, generator=torch.Generator().manual_seed(0)).waypoints
+    legs = np.linalg.norm(np.diff(dense, axis=0), axis=-1)
+    assert len(dense) > 10
+    assert np.array_equal(dense[0], start) and np.array_equal(dense[-1], goal)
+    # the first round's legs are ~length / (h - 1); two rounds leave most legs short
+    assert np.median(legs) <= 0.5 and legs.max() < np.linalg.norm(np.diff(plain.waypoints, axis=0),
+                                                                  axis=-1).max()
+    # off: bit for bit the paper's plan
+    again = SparseDiffusion(ckpt, SparseConfig(num_candidates=4, selection="collision_aware"),
+                            cost=cost).plan(start, goal, generator=torch.Generator().manual_seed(0))
+    assert np.array_equal(again.waypoints, plain.waypoints)
+
+
+@pytest.mark.parametrize("replan", ["every_waypoint", "once"])
+def test_algorithm1_with_max_spacing_reaches_the_goal_through_every_waypoint(replan):
+    fp, cost = _cost_triple()
+    sd = SparseDiffusion(load_model("sd", GRID, footprint=fp),
+                         SparseConfig(num_candidates=4, selection="collision_aware",
+                                      max_spacing=0.6), cost=cost)
+    hd = HierarchicalPlanner(sd, load_model("dd", GRID, footprint=fp), costmap=cost[0],
+                             footprint_points=fp.points, cost_config=cost[2], replan=replan)
+    start, goal = np.array([1.5, 1.5]), np.array([10.5, 7.5])
+    plan = hd.plan(start, goal, generator=torch.Generator().manual_seed(0))
+    assert len(plan.segments) > 9  # more iterations than P^g - 1
+    assert np.allclose(plan.trajectory[0], start) and np.allclose(plan.trajectory[-1], goal,
+                                                                  atol=1e-5)
+    for a, b in zip(plan.segments, plan.segments[1:]):
+        assert np.allclose(a[-1], b[0])
+    assert len(plan.global_plans) == len(plan.segments)

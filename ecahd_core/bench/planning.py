@@ -85,6 +85,7 @@ class PlanningBenchSettings:
     polish_steps: int = 30  # DenseConfig's default; 0 = the paper's Algorithm 1
     keep_better: bool = True  # DenseConfig's default; False = the paper's Algorithm 1
     replan: str = "every_waypoint"
+    max_spacing: float | None = None  # [m] SparseConfig.max_spacing (None: off)
     warm_fraction: float = 0.0  # SparseConfig.warm_fraction: HD's warm-started re-plans (0: off)
     ablation: bool = True
     safety_net: bool = True  # ours: judge HD / ECAHD with and without the net (ecahd_core.safety)
@@ -198,7 +199,8 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                 num_candidates=settings.candidates, selection=settings.selection, guidance=(method == "sd" and guidance),
                 guidance_weight=settings.guidance_weight,
                 guidance_space=settings.guidance_space,
-                warm_fraction=settings.warm_fraction), cost=cost)
+                warm_fraction=settings.warm_fraction, max_spacing=settings.max_spacing),
+                cost=cost)
             if method == "sd":
                 plan_fn = lambda s, g: (sd.plan(s, g, generator=gen).waypoints, None)  # noqa: E731
             else:
@@ -279,6 +281,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                "dd_retries": settings.dd_retries, "polish_steps": settings.polish_steps,
                "keep_better": settings.keep_better,
                "replan": settings.replan, "warm_fraction": settings.warm_fraction,
+               "max_spacing": settings.max_spacing,
                "safety_net": settings.safety_net, "net_retries": settings.net_retries,
                "torch": torch.__version__,
                "threads": torch.get_num_threads()}
@@ -308,8 +311,12 @@ def format_markdown(r: PlanningBenchResult) -> str:
              f"SD replanning {c['replan']}"
              + (f" warm-started at {c['warm_fraction']:g} of the schedule"
                 if c.get("warm_fraction") and c["replan"] == "every_waypoint" else "")
+             + (f", waypoints at most {c['max_spacing']:g} m apart (SD re-samples longer legs)"
+                if c.get("max_spacing") else "")
              + ", "
-             f"torch {c['torch']} with {c['threads']} thread(s). Each cell: ours / paper.", "",
+             f"torch {c['torch']} with {c['threads']} thread(s). Each cell: ours / paper"
+             + ("." if c["map"] == "maze2d-large" else
+                " (the paper's figures are for maze2d-large, shown for scale only)."), "",
              f"| metric | robot | {head} |", "|---|---|" + "---|" * len(cols)]
 
     def row(metric, key, nd, paper_key):

@@ -201,6 +201,10 @@ def _add_planning_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--warm-fraction", type=float, default=d.warm_fraction, metavar="F",
                         help="HD every_waypoint: warm-start each re-plan from the previous plan, "
                              "running the last F (0..1) of the DDIM schedule (0: from noise)")
+    parser.add_argument("--max-spacing", type=float, default=d.max_spacing, metavar="M",
+                        help="[m] waypoint spacing by distance: SD re-samples legs longer than "
+                             "this between their ends (big maps; default: off, the paper's "
+                             "fixed P^g)")
     parser.add_argument("--no-ablation", action="store_true", help="skip Table II")
     parser.add_argument("--json", metavar="FILE", help="one record per cell")
     parser.add_argument("--md", metavar="FILE", help="Table I / Table II as markdown")
@@ -219,7 +223,7 @@ def _run_planning(args: argparse.Namespace) -> int:
         guidance_weight=args.omega, guidance_space=args.guidance_space, margin=args.margin,
         c_th=args.c_th, dd_retries=args.dd_retries, polish_steps=args.polish_steps,
         keep_better=not args.no_keep_better, replan=args.replan,
-        warm_fraction=args.warm_fraction,
+        warm_fraction=args.warm_fraction, max_spacing=args.max_spacing,
         ablation=not args.no_ablation)
     result = run_planning_benchmark(settings, progress=not args.no_progress)
     md = format_markdown(result)

@@ -61,6 +61,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="guide the diffusion by the cost J (default: on for ecahd, off otherwise)")
     p.add_argument("--waypoints", type=int, default=10,
                    help="number of sparse waypoints reported (P^g)")
+    p.add_argument("--max-spacing", type=float, default=None, metavar="M",
+                   help="[m] SD/ECAHD: waypoint spacing by distance, legs longer than this "
+                        "re-sampled by SD between their ends (big maps; default: off)")
     p.add_argument("--candidates", type=int, default=10,
                    help="diffusion candidates sampled in one batch (best of N)")
     p.add_argument("--selection", default="collision_aware",
@@ -230,7 +233,7 @@ def _plan_diffusion(args, grid, footprint, start, goal):
     sd = SparseDiffusion(load_model("sd", grid, path=args.sd_model, footprint=footprint,
                                     horizon=args.waypoints),
                          SparseConfig(num_candidates=args.candidates, horizon=args.waypoints,
-                                      selection=args.selection,
+                                      selection=args.selection, max_spacing=args.max_spacing,
                                       guidance=(args.method == "sd" and guided)), cost=cost)
     if args.method == "sd":
         sd.plan(start, goal, generator=gen())  # warm-up

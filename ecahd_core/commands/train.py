@@ -1,7 +1,8 @@
 """``ecahd train {sd,dd,fd}`` and ``ecahd train-all``: train the diffusion models of a map.
 
     ecahd train sd --data data/large.npz --out runs/train/sd.pt
-    ecahd train-all --map maze2d-large          # dataset + SD + DD + FD, seeded, into the package
+    ecahd train-all --map my_map.yaml --out-dir my_models   # dataset + SD + DD, seeded
+    ecahd train-all --map maze2d-large --kinds sd dd fd     # the shipped models, bit for bit
 
 Defaults come from ``ecahd_core.model_zoo.RECIPES``; ``--device cuda`` trains on a GPU, and the
 same command under ``torchrun --nproc_per_node N`` trains with DistributedDataParallel.
@@ -47,11 +48,14 @@ def add_all_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--robot", default="circle",
                    help="footprint whose clearance the expert A* paths keep")
     p.add_argument("--pairs", type=int, default=5000, help="expert start/goal pairs")
-    p.add_argument("--kinds", nargs="+", default=["sd", "dd", "fd"], choices=("sd", "dd", "fd"))
+    p.add_argument("--kinds", nargs="+", default=["sd", "dd"], choices=("sd", "dd", "fd"),
+                   help="models to train: ECAHD needs SD and DD; add fd for the Full "
+                        "Diffusion baseline of the benchmarks (about 8-10 more minutes)")
     p.add_argument("--work-dir", default="runs/train",
                    help="dataset and full checkpoints (resumable) go here")
     p.add_argument("--out-dir", default=None,
-                   help="inference-only models go here (default: the package's models folder)")
+                   help="inference-only models go here (default: the package's models folder; "
+                        "another folder is found through $ECAHD_MODELS)")
     _add_common(p)
 
 
@@ -83,6 +87,46 @@ def train_one(kind: str, dataset, *, out: Path, seed: int, device: str, steps: i
     return result
 
 
+# the horizons each kind learns with the dataset's defaults (ecahd_core.dataset): SD 2..P^g,
+# DD P^l points, FD the whole 100-point sequence; only their lengths matter to a step's cost
+ESTIMATE_HORIZONS = {"sd": tuple(range(2, 11)), "dd": (4,), "fd": (100,)}
+
+
+def seconds_per_step(kind: str, grid, *, device: str = "cpu", probe: int = 8) -> float:
+    """[s] one optimiser step of ``kind``'s recipe on this machine, measured on synthetic
+    trajectories of the learnt horizons (a step's cost does not depend on the values): short
+    runs of :func:`~ecahd_core.diffusion.train` (a warm-up, then 1 and 1 + ``probe`` steps; the
+    difference divides out the set-up)."""
+    import tempfile
+
+    import numpy as np
+
+    from ecahd_core.diffusion import Normalizer, TrainConfig, train
+    from ecahd_core.model_zoo import recipe
+
+    r = recipe(kind)
+    lo, hi = grid.bounds[:2], grid.bounds[2:]
+    rng = np.random.default_rng(0)
+    arrays = {h: rng.uniform(lo, hi, size=(r.batch_size, h, 2)).astype(np.float32)
+              for h in ESTIMATE_HORIZONS[kind]}
+    config = r.denoiser_config(max(arrays))
+    normalizer = Normalizer.from_bounds(*grid.bounds)
+    times = []
+    quiet = logging.getLogger("ecahd_core.diffusion.training")
+    level = quiet.level
+    quiet.setLevel(logging.WARNING)  # the probes' own log lines are noise
+    with tempfile.TemporaryDirectory() as tmp:
+        for steps in (1, 1, 1 + probe):
+            tc = TrainConfig(steps=steps, batch_size=r.batch_size, warmup_steps=0, lr=r.lr,
+                             ema_decay=r.ema_decay, seed=0, device=device, log_every=10 ** 9)
+            t0 = time.perf_counter()
+            train(config, arrays, normalizer, tc, kind=kind, out_path=Path(tmp) / "probe.pt",
+                  progress=False)
+            times.append(time.perf_counter() - t0)
+    quiet.setLevel(level)
+    return max(0.0, (times[2] - times[1]) / probe)
+
+
 def _set_threads(n: int | None) -> None:
     """``--threads``: n torch threads (None: every core, :func:`training_threads`)."""
     set_torch_threads(training_threads() if n is None else n)
@@ -105,10 +149,19 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _duration(seconds: float) -> str:
+    return f"{seconds:.0f} s" if seconds < 90 else f"{seconds / 60:.0f} min"
+
+
+def _clock(seconds_from_now: float) -> str:
+    """The local wall-clock time ``seconds_from_now`` s from now, HH:MM."""
+    return time.strftime("%H:%M", time.localtime(time.time() + seconds_from_now))
+
+
 def run_all(args: argparse.Namespace) -> int:
     from ecahd_core.dataset import generate_dataset
     from ecahd_core.maps import load_map
-    from ecahd_core.model_zoo import MODELS_DIR, shipped_path
+    from ecahd_core.model_zoo import MODELS_DIR, MODELS_ENV, recipe, shipped_path
 
     _set_threads(args.threads)
     work = Path(args.work_dir)
@@ -116,12 +169,23 @@ def run_all(args: argparse.Namespace) -> int:
     grid = load_map(args.map)
     out_dir = Path(args.out_dir) if args.out_dir else MODELS_DIR
     t_start = time.perf_counter()
+    # an ETA from the start: each model's step time measured now, the dataset has its own bar
+    steps = {k: max(1, int(round(recipe(k).steps * args.steps_scale))) for k in args.kinds}
+    estimate = {k: steps[k] * seconds_per_step(k, grid, device=args.device)
+                for k in args.kinds}
+    train_s = sum(estimate.values())
+    print(f"train-all on {grid.name}: {args.pairs} expert pairs (progress bar below), then "
+          + ", ".join(f"{k.upper()} {steps[k]} steps ~{_duration(estimate[k])}"
+                      for k in args.kinds)
+          + f": training ~{_duration(train_s)} after the dataset (step times measured "
+            f"in {time.perf_counter() - t_start:.0f} s)", flush=True)
     data_path = work / f"{grid.name}_{args.robot}_{args.pairs}_s{args.seed}.npz"
     dataset = generate_dataset(grid, pairs=args.pairs, seed=args.seed, footprint_spec=args.robot,
                                progress=not args.no_progress)
     dataset.save(data_path)
     times = {"dataset": time.perf_counter() - t_start}
-    print(f"dataset: {dataset.num_pairs} pairs -> {data_path} ({times['dataset']:.0f} s)")
+    print(f"dataset: {dataset.num_pairs} pairs -> {data_path} ({times['dataset']:.0f} s); "
+          f"ETA {_clock(train_s)} (~{_duration(train_s)} of training)", flush=True)
     for kind in args.kinds:
         t0 = time.perf_counter()
         ship = out_dir / shipped_path(grid.name, kind).name
@@ -130,8 +194,13 @@ def run_all(args: argparse.Namespace) -> int:
                            progress=not args.no_progress)
         times[kind] = time.perf_counter() - t0
         last = result.loss_history[-1][1] if result.loss_history else float("nan")
-        print(f"{kind}: {result.step} steps, final loss {last:.4f}, {times[kind]:.0f} s -> {ship}")
+        left = sum(estimate[k] for k in args.kinds if k not in times)
+        print(f"{kind}: {result.step} steps, final loss {last:.4f}, {times[kind]:.0f} s "
+              f"(estimated {estimate[kind]:.0f} s) -> {ship}"
+              + (f"; ETA {_clock(left)}" if left else ""), flush=True)
     total = time.perf_counter() - t_start
     print("wall time: " + ", ".join(f"{k} {v:.0f} s" for k, v in times.items())
           + f"; total {total / 60:.1f} min")
+    if out_dir.resolve() != MODELS_DIR.resolve():
+        print(f"to use them: export {MODELS_ENV}={out_dir.resolve()}  (or --models on demo)")
     return 0
