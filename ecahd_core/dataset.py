@@ -46,8 +46,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ecahd_core.astar import (SDF_TOLERANCE, AStarPlanner, CoarseAStarPlanner,
-                              clearance_for_footprint, path_length, sample_free_point)
+from ecahd_core.astar import (COARSE_ABOVE_CELLS, COARSE_BLOCK_SIZE, SDF_TOLERANCE, AStarPlanner,
+                              CoarseAStarPlanner, clearance_for_footprint, path_length,
+                              sample_free_point)
 from ecahd_core.errors import DatasetError, PlanningError, TrajectoryError
 from ecahd_core.footprint import make_footprint
 from ecahd_core.maps import GridMap
@@ -60,8 +61,7 @@ DTYPE = np.float32  # trajectories, starts, goals, lengths
 _ENDPOINT_TRIES = 100  # jittered draws per start / goal before falling back to a cell centre
 _ZIP_DATE = (1980, 1, 1, 0, 0, 0)  # fixed member timestamps: reproducible files
 EXPERTS = ("auto", "exact", "coarse")
-EXACT_MAX_CELLS = 50_000  # expert "auto": exact A* up to this many map cells, coarse above
-COARSE_BLOCK_SIZE = 0.3  # [m] block side of the coarse expert's search graph
+EXACT_MAX_CELLS = COARSE_ABOVE_CELLS  # expert "auto": exact A* up to this many cells, coarse above
 _CHUNKSIZE = 8  # attempts per task sent to a worker process
 
 

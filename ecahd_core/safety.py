@@ -149,9 +149,9 @@ class SafetyNet:
     def astar(self):
         """The fallback's AStarPlanner (built on first use)."""
         if self._astar is None:
-            from ecahd_core.astar import AStarPlanner
+            from ecahd_core.astar import planner_for
 
-            self._astar = AStarPlanner(self.grid, self.clearance)
+            self._astar = planner_for(self.grid, self.clearance)
         return self._astar
 
     def check(self, path: np.ndarray):

@@ -281,9 +281,9 @@ class GlobalPlanner(Node):
         if p.method == "sd":
             sparse = self._build_sd(grid)
         elif p.method == "astar":
-            from ecahd_core.astar import AStarPlanner, clearance_for_footprint
+            from ecahd_core.astar import clearance_for_footprint, planner_for
 
-            astar = AStarPlanner(grid, clearance_for_footprint(self.judged))
+            astar = planner_for(grid, clearance_for_footprint(self.judged))
         else:
             fd = self._build_fd(grid)
         self.grid, self.sparse, self.astar, self.fd = grid, sparse, astar, fd
@@ -495,16 +495,19 @@ class GlobalPlanner(Node):
         t0 = time.perf_counter()
         now = self._now()
         # what is remembered, else only what was seen lately (a moving obstacle's trail in the
-        # memory can close every way), else the static map
-        grids = [self.memory.fused(now), self.memory.fused(now, within=RECENT_OBSTACLES),
-                 self.grid] if self.memory is not None else [self.grid]
+        # memory can close every way). Never the static map alone: a path through what the
+        # scans see now is not published; the refiner stays stopped and asks again.
+        grids = [self.memory.fused(now), self.memory.fused(now, within=RECENT_OBSTACLES)] \
+            if self.memory is not None else [self.grid]
         for i, grid in enumerate(grids):
             try:
                 path = detour(grid, self.judged, start, goal)
                 break
-            except PlanningError:
+            except PlanningError as exc:
                 if i == len(grids) - 1:
-                    raise
+                    raise PlanningError(f"no way round the obstacles the scans found (also "
+                                        f"with only those of the last {RECENT_OBSTACLES:g} s): "
+                                        f"{exc}; the robot waits for a way to open") from None
         path = resample(path, ASTAR_SPACING)
         self.fallbacks += 1
         remembered = int(self.memory.mask(now).sum()) if self.memory is not None else 0

@@ -128,7 +128,8 @@ PARAMETERS = [
     ParamSpec("monitor_time_to_collision", 1.0, "[s] horizon of the collision monitor"),
     ParamSpec("monitor_stop_margin", 0.02, "[m] footprint growth that stops the robot"),
     ParamSpec("monitor_slowdown_margin", 0.3, "[m] footprint growth that slows the robot down"),
-    ParamSpec("monitor_slowdown_ratio", 0.3, "v and w are scaled by this when slowing down"),
+    ParamSpec("monitor_slowdown_ratio", 0.3, "slowing down caps |v| and |w| at this times "
+                                             "max_v and max_w"),
     ParamSpec("monitor_source_timeout", 0.5, "[s] scans older than this (after the first) stop "
                                              "the robot"),
     *shared("seed", "torch_threads"),
@@ -218,7 +219,9 @@ class LocalRefinerParams:
             time_to_collision=self.monitor_time_to_collision,
             stop_margin=self.monitor_stop_margin, slowdown_margin=self.monitor_slowdown_margin,
             slowdown_ratio=self.monitor_slowdown_ratio,
-            source_timeout=self.monitor_source_timeout)
+            source_timeout=self.monitor_source_timeout,
+            # the controller ramps from the command sent: cap, do not scale again each tick
+            slowdown_limits=(self.max_v, self.max_w))
 
     @property
     def scan_offset(self) -> tuple[float, float, float]:
@@ -348,6 +351,10 @@ class LocalRefiner(Node):
         with self._lock:
             self.params = params
             self.runner.config = params.runner_config()
+            if self.monitor is not None:  # its slowdown cap follows max_v / max_w
+                from ecahd_core.collision_monitor import CollisionMonitor
+
+                self.monitor = CollisionMonitor(self.footprint, params.monitor_config())
         self.get_logger().info("parameters updated")
 
     def _now(self) -> float:

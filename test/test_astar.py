@@ -370,3 +370,23 @@ def test_coarse_paths_are_collision_free_and_near_shortest(office):
     print("coarse / exact A* length:", np.round(ratios, 3))
     # measured: mean 1.00x, worst 1.03x; allow some slack for other maps of this kind
     assert max(ratios) < 1.10 and np.mean(ratios) < 1.03
+
+
+def test_planner_for_picks_the_coarse_search_on_big_maps_and_it_stands_in_everywhere(office):
+    from ecahd_core.astar import COARSE_ABOVE_CELLS, plan_from_pose, planner_for
+
+    small = planner_for(builtin_map("maze2d-umaze"), 0.2)
+    assert type(small) is AStarPlanner  # 50 x 50 cells: exact
+    grid = office.grid
+    assert grid.height * grid.width > COARSE_ABOVE_CELLS
+    big = planner_for(grid, 0.4)
+    assert isinstance(big, CoarseAStarPlanner) and big.clearance == 0.4
+    # the fine planner's queries answer through it (SafetyNet, plan_from_pose use them)
+    a, b = office.anchors[0], office.anchors[1]
+    assert big.point_clearance(a) == big.fine.point_clearance(a)
+    assert big.check_endpoint(a, "start")[1] == big.fine.check_endpoint(a, "start")[1]
+    path = plan_from_pose(big, a, b)
+    np.testing.assert_array_equal(path[[0, -1]], [a, b])
+    assert big.fine.path_is_clear(path)
+    with pytest.raises(AttributeError):
+        big.no_such_query

@@ -50,6 +50,25 @@ def test_slows_down_within_the_margin():
     assert result.min_time_to_collision == math.inf
 
 
+def test_slowdown_with_limits_caps_the_command_and_a_ramp_keeps_its_speed():
+    cfg = CollisionMonitorConfig(slowdown_limits=(0.5, 1.5))  # cap 0.15 m/s, 0.45 rad/s
+    monitor = CollisionMonitor(SQUARE, cfg)
+    result = monitor.filter(ORIGIN, 0.4, 0.2, box_face(0.7), 0.0, 0.0)
+    assert result.action == "slowdown"
+    assert (result.v, result.w) == pytest.approx((0.15, 0.2))
+    # beside a wall 0.25 m from the side (slow down, never stop), a controller that ramps from
+    # the command sent (+0.05 m/s per tick) settles at the cap; scaling by the ratio every
+    # tick decays to 0.3 * 0.05 / 0.7 = 0.021 m/s
+    for scaled in (False, True):
+        m = CollisionMonitor(SQUARE, CollisionMonitorConfig() if scaled else cfg)
+        v = 0.4
+        for _ in range(50):
+            v = m.filter(ORIGIN, min(0.5, v + 0.05), 0.0, wall_along_x(0.45), 0.0, 0.0).v
+        assert v == pytest.approx(0.3 * 0.05 / 0.7 if scaled else 0.15, abs=1e-3)
+    with pytest.raises(EcahdError, match="slowdown_limits"):
+        CollisionMonitorConfig(slowdown_limits=(0.5,))
+
+
 def test_driving_away_and_parallel_pass():
     # reversing away from the box: the gap grows -> unchanged
     result = run(box_face(0.7), -0.5)

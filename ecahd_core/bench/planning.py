@@ -160,7 +160,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
     import torch
     from tqdm import tqdm
 
-    from ecahd_core.astar import AStarPlanner, clearance_for_footprint
+    from ecahd_core.astar import clearance_for_footprint, planner_for
     from ecahd_core.cost import CollisionCost, CostConfig
     from ecahd_core.footprint import make_footprint
     from ecahd_core.maps import load_map
@@ -177,7 +177,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
 
     def astar_for(robot, fp):
         if robot not in astars:
-            astars[robot] = AStarPlanner(grid, clearance_for_footprint(fp))
+            astars[robot] = planner_for(grid, clearance_for_footprint(fp))
         return astars[robot]
 
     def run_cell(method, guidance, robot, cost_config=None, variant=""):

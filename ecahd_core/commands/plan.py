@@ -91,7 +91,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from ecahd_core.astar import AStarPlanner, clearance_for_footprint, path_length
+    from ecahd_core.astar import clearance_for_footprint, path_length, planner_for
     from ecahd_core.collision import check_collision
     from ecahd_core.dataset import resample_by_arclength
     from ecahd_core.footprint import make_footprint
@@ -107,7 +107,7 @@ def run(args: argparse.Namespace) -> int:
     candidates, dd_calls, dd_poses, segments, hd, astar = [], 0, None, None, None, None
     if args.method == "astar":
         t0 = time.perf_counter()
-        planner = AStarPlanner(grid, clearance_for_footprint(footprint, padding=args.padding))
+        planner = planner_for(grid, clearance_for_footprint(footprint, padding=args.padding))
         t1 = time.perf_counter()
         path = planner.plan(start, goal)
         t2 = time.perf_counter()
