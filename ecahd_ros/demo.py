@@ -186,6 +186,7 @@ class NodeProcess:
         self.log_path = out / "logs" / f"{name}.log"
         self.log_path.parent.mkdir(parents=True, exist_ok=True)
         env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "PYTHONUNBUFFERED": "1",
+               "ECAHD_DIE_WITH_PARENT": str(os.getpid()),  # ecahd_ros.spin.die_with_parent
                "ROS_AUTOMATIC_DISCOVERY_RANGE": os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE",
                                                                "LOCALHOST")}
         self._log = open(self.log_path, "w")  # noqa: SIM115 (closed in stop())

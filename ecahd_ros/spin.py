@@ -50,10 +50,37 @@ def spin_forever(executor, logger, *, period: float = 0.1) -> None:
                 logger.error(f"exception while spinning (ignored, node keeps running): {text}")
 
 
+DIE_WITH_PARENT_ENV = "ECAHD_DIE_WITH_PARENT"  # set by `ecahd demo` / benchmarks for their nodes
+
+
+def die_with_parent() -> None:
+    """Linux: have the kernel send SIGTERM to this process when its parent dies (prctl
+    PR_SET_PDEATHSIG), so nodes that `ecahd demo` or a benchmark started do not outlive a
+    killed run (one did, and kept simulating on its ROS domain). No-op elsewhere."""
+    import ctypes
+    import os
+    import signal
+
+    try:
+        libc = ctypes.CDLL("libc.so.6", use_errno=True)
+    except OSError:
+        return
+    parent = int(os.environ.get(DIE_WITH_PARENT_ENV, "0") or 0)
+    libc.prctl(1, int(signal.SIGTERM))  # PR_SET_PDEATHSIG = 1
+    if parent and os.getppid() != parent:  # the parent died before the prctl took effect
+        os.kill(os.getpid(), signal.SIGTERM)
+
+
 def spin_node(make_node: Callable[[], Node], args=None, *, name: str = "node") -> None:
     """Create the node after ``rclpy.init`` and spin it until interrupted; ``destroy_node`` runs
     in every case (nodes release their resources, e.g. close a bag, there). A node that cannot
-    configure exits with :data:`CONFIGURE_EXIT_CODE` and one line naming the reason."""
+    configure exits with :data:`CONFIGURE_EXIT_CODE` and one line naming the reason. Started by
+    `ecahd demo` (``ECAHD_DIE_WITH_PARENT`` set), the node ends with the process that started
+    it (:func:`die_with_parent`)."""
+    import os
+
+    if os.environ.get(DIE_WITH_PARENT_ENV):
+        die_with_parent()
     rclpy.init(args=args)
     try:
         node = make_node()
