@@ -206,15 +206,7 @@ class SparseDiffusion:
                                         generator=generator, guide=guide,
                                         warm_start=warm_start,
                                         warm_fraction=warm_fraction).trajectories
-        col = None
-        if cfg.selection == "collision_aware":
-            from ecahd_core.cost import trajectory_cost
-
-            costmap, fp, cost_config = self.cost
-            with torch.no_grad():
-                col = trajectory_cost(cands.to(costmap.dtype), goal_t.to(costmap.dtype), fp,
-                                      costmap, **cost_config.cost_kwargs()).collision_cost
-            col = col.cpu().numpy()
+        col = self._collision_costs(cands, goal_t)
         cands_np = cands.detach().cpu().numpy().astype(np.float64)
         best = select_best(cands_np, np.asarray(goal, dtype=np.float64), epsilon=cfg.epsilon,
                            rule=cfg.selection, collision_costs=col,
@@ -225,6 +217,19 @@ class SparseDiffusion:
         return SparsePlan(waypoints=waypoints, candidates=cands_np, best=best,
                           collision_costs=col, time_ms=(time.perf_counter() - t0) * 1e3)
 
+    def _collision_costs(self, cands: torch.Tensor, goals: torch.Tensor) -> np.ndarray | None:
+        """J's collision cost of candidates (B, P, 2) [m] towards goals (2,) or (B, 2) -> (B,),
+        for the collision_aware rule (None under the paper's rule)."""
+        if self.config.selection != "collision_aware":
+            return None
+        from ecahd_core.cost import trajectory_cost
+
+        costmap, fp, cost_config = self.cost
+        with torch.no_grad():
+            col = trajectory_cost(cands.to(costmap.dtype), goals.to(costmap.dtype), fp, costmap,
+                                  **cost_config.cost_kwargs()).collision_cost
+        return col.cpu().numpy()
+
     def _candidates(self, starts: torch.Tensor, goals: torch.Tensor, horizon: int,
                     generator: torch.Generator | None) -> np.ndarray:
         """The best of N unguided SD samples for each of K legs, in one batch.
@@ -234,15 +239,8 @@ class SparseDiffusion:
         b = goals.repeat_interleave(N, dim=0)
         cands = self.sampler.sample(batch=K * N, horizon=horizon, conditions={0: a, -1: b},
                                     generator=generator).trajectories  # (K*N, h, 2)
-        col = None
-        if cfg.selection == "collision_aware":
-            from ecahd_core.cost import trajectory_cost
-
-            costmap, fp, cost_config = self.cost
-            with torch.no_grad():
-                col = trajectory_cost(cands.to(costmap.dtype), b.to(costmap.dtype), fp, costmap,
-                                      **cost_config.cost_kwargs()).collision_cost
-            col = col.cpu().numpy().reshape(K, N)
+        col = self._collision_costs(cands, b)
+        col = None if col is None else col.reshape(K, N)
         cands_np = cands.detach().cpu().numpy().astype(np.float64).reshape(K, N, horizon, 2)
         goals_np = goals.cpu().numpy().astype(np.float64)
         out = np.empty((K, horizon, 2))
