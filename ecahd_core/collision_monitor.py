@@ -19,6 +19,17 @@ Every command (v, w) is checked before it reaches the base:
    again (step 3; stop if it fails).
 5. Else the command passes unchanged ("none").
 
+Moving obstacles (beyond Nav2). Given each point's velocity (:mod:`ecahd_core.tracking`), a
+point is predicted at p + v t at step time t, so the monitor judges where a crossing person or
+cart *will* be. A robot that stops in its way is hit all the same, so when the command must
+stop and the stopped robot itself would be touched by a moving point within ``yield_horizon``
+seconds, the monitor **yields**: it tries a small set of commands (v in {-1, -1/2, 0, 1/2, 1}
+x max_v, w in {-1/2, 0, 1/2} x max_w of ``escape_limits``), drops every one whose simulated
+poses the caller's ``free`` check refuses (the static map: the scan points here are only
+the unmapped ones) or that comes within stop_margin of a point sooner than standing would,
+and sends the one that is touched latest (never, at best) and keeps the most clearance:
+often backing off out of the crossing, sometimes clearing it ahead. Standing still wins ties.
+
 The step k of the first stop hit gives ``min_time_to_collision`` = k sim_dt [s] (``inf`` when
 nothing is hit within the horizon). A point is never skipped between two steps as long as
 |v| sim_dt is smaller than the footprint's width. Frames and units: map frame, metres, radians,
@@ -36,7 +47,9 @@ from ecahd_core.errors import EcahdError
 from ecahd_core.footprint import Footprint
 from ecahd_core.local_costmap import check_real
 
-ACTIONS = ("none", "slowdown", "stop")
+ACTIONS = ("none", "slowdown", "stop", "yield")
+_ESCAPE_V = (-1.0, -0.5, 0.0, 0.5, 1.0)  # escape commands' v as fractions of max_v
+_ESCAPE_W = (-0.5, 0.0, 0.5)  # ... and w as fractions of max_w
 _OWNER = "collision monitor"
 _STRAIGHT_W = 1e-9  # [rad/s] below this |w| the motion is integrated as a straight line
 
@@ -62,6 +75,10 @@ class CollisionMonitorConfig:
             a fixed point far below the ratio (ratio * accel * dt / (1 - ratio): 0.02 m/s for
             0.3, 1 m/s^2 and 20 Hz, measured in the closed loop), while the cap holds it at
             ratio * max_v.
+        escape_limits: (max_v [m/s], max_w [rad/s]) of the commands tried when yielding to a
+            moving obstacle; None: never yield (stop, as Nav2).
+        yield_horizon: [s] how far ahead a moving point is predicted when judging whether the
+            stopped robot would be hit, and the escape commands.
     """
 
     time_to_collision: float = 1.0
@@ -72,15 +89,19 @@ class CollisionMonitorConfig:
     min_points: int = 1
     source_timeout: float = 2.0
     slowdown_limits: tuple[float, float] | None = None
+    escape_limits: tuple[float, float] | None = None
+    yield_horizon: float = 2.0
 
     def __post_init__(self) -> None:
-        if self.slowdown_limits is not None:
-            if len(self.slowdown_limits) != 2:
-                raise EcahdError(f"slowdown_limits must be (max_v, max_w) or None, got "
-                                 f"{self.slowdown_limits!r}")
-            for name, value in zip(("max_v", "max_w"), self.slowdown_limits):
-                check_real(_OWNER, f"slowdown_limits {name}", value, zero_ok=False)
-        for name in ("time_to_collision", "sim_dt", "slowdown_ratio"):
+        for field in ("slowdown_limits", "escape_limits"):
+            limits = getattr(self, field)
+            if limits is None:
+                continue
+            if len(limits) != 2:
+                raise EcahdError(f"{field} must be (max_v, max_w) or None, got {limits!r}")
+            for name, value in zip(("max_v", "max_w"), limits):
+                check_real(_OWNER, f"{field} {name}", value, zero_ok=False)
+        for name in ("time_to_collision", "sim_dt", "slowdown_ratio", "yield_horizon"):
             check_real(_OWNER, name, getattr(self, name), zero_ok=False)
         for name in ("slowdown_margin", "stop_margin", "source_timeout"):
             check_real(_OWNER, name, getattr(self, name), zero_ok=True)
@@ -98,6 +119,11 @@ class CollisionMonitorConfig:
         """K: simulated steps after the current pose (ceil(time_to_collision / sim_dt))."""
         return max(1, math.ceil(self.time_to_collision / self.sim_dt - 1e-9))
 
+    @property
+    def yield_steps(self) -> int:
+        """Simulated steps of the yield check (ceil(yield_horizon / sim_dt))."""
+        return max(1, math.ceil(self.yield_horizon / self.sim_dt - 1e-9))
+
 
 @dataclass(frozen=True)
 class MonitorResult:
@@ -106,7 +132,7 @@ class MonitorResult:
     Attributes:
         v: [m/s] the filtered linear velocity.
         w: [rad/s] the filtered angular velocity.
-        action: "none", "slowdown" or "stop".
+        action: "none", "slowdown", "stop" or "yield" (an escape from a moving obstacle).
         min_time_to_collision: [s] time of the first simulated step whose footprint (+
             stop_margin) holds min_points points, for the command as given; inf if none
             within the horizon, 0 when the data is stale.
@@ -140,10 +166,12 @@ class CollisionMonitor:
         # points farther than this from the robot now cannot trigger anything in the horizon
         self._reach_static = footprint.circumscribed_radius + cfg.slowdown_margin
         self._t = np.arange(cfg.steps + 1) * cfg.sim_dt  # (K+1,) [s]
+        self._t_yield = np.arange(cfg.yield_steps + 1) * cfg.sim_dt  # (Ky+1,) [s]
+        self.last_escape: np.ndarray | None = None  # (Ky+1, 3) the last yield's poses
 
     # ------------------------------------------------------------------------------ filter
     def filter(self, pose, v: float, w: float, points, points_stamp: float | None,
-               now: float) -> MonitorResult:
+               now: float, *, velocities=None, free=None) -> MonitorResult:
         """Filter one velocity command.
 
         Args:
@@ -154,6 +182,10 @@ class CollisionMonitor:
                 :meth:`LocalCostmap.points`; rows with NaN are ignored.
             points_stamp: [s] time the points were measured; None = no data yet.
             now: [s] the current time.
+            velocities: (M, 2) [m/s] each point's velocity (:class:`MotionTracker`); None:
+                every point is static.
+            free: callable (N, 3) poses -> (N,) bool, True where the footprint is clear of
+                the static map; needed to yield (the escape commands are checked with it).
 
         Returns:
             MonitorResult with the command to send.
@@ -172,22 +204,42 @@ class CollisionMonitor:
                                  f"obstacle data is {age:.2f} s old (> source_timeout "
                                  f"{cfg.source_timeout} s)")
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)  # (M, 2)
-        pts = pts[np.isfinite(pts).all(axis=1)]
-        # keep only the points the footprint can reach within the horizon
-        reach = self._reach_static + abs(v) * cfg.time_to_collision
+        vel = np.zeros_like(pts) if velocities is None else \
+            np.asarray(velocities, dtype=np.float64).reshape(-1, 2)  # (M, 2) [m/s]
+        if vel.shape != pts.shape:
+            raise EcahdError(f"velocities must be (M, 2) like the points {pts.shape}, got "
+                             f"{vel.shape}")
+        ok = np.isfinite(pts).all(axis=1)
+        pts, vel = pts[ok], np.where(np.isfinite(vel[ok]), vel[ok], 0.0)
+        speed = np.hypot(vel[:, 0], vel[:, 1])  # (M,)
+        # keep only the points that can reach the footprint within the horizons
+        horizon = max(cfg.time_to_collision, cfg.yield_horizon if speed.any() else 0.0)
+        reach = self._reach_static + (abs(v) + speed) * horizon  # (M,)
         near = np.sum((pts - pose[:2]) ** 2, axis=1) <= reach * reach
-        pts = pts[near]  # (M', 2)
+        pts, vel = pts[near], vel[near]  # (M', 2)
         if len(pts) < cfg.min_points:
             return MonitorResult(float(v), float(w), "none", math.inf, "no obstacle in reach")
+        moving = bool(np.any(vel))
 
-        clearance = self._clearance(pose, v, w, pts)  # (K+1, M') [m]
+        clearance = self._clearance(pose, v, w, pts, vel)  # (K+1, M') [m]
         stop_step = self._first_step(clearance, cfg.stop_margin)
         if stop_step is not None:
             ttc = float(self._t[stop_step])
-            return MonitorResult(0.0, 0.0, "stop", ttc,
-                                 f"{self._count(clearance[stop_step], cfg.stop_margin)} "
-                                 f"point(s) within {cfg.stop_margin} m of the footprint in "
-                                 f"{ttc:.2f} s")
+            reason = (f"{self._count(clearance[stop_step], cfg.stop_margin)} point(s) within "
+                      f"{cfg.stop_margin} m of the footprint in {ttc:.2f} s")
+            if moving:
+                escape = self._yield(pose, pts, vel, free)
+                if escape is not None:
+                    return MonitorResult(escape[0], escape[1], "yield", ttc,
+                                         f"{reason}; a moving obstacle would hit the stopped "
+                                         f"robot: {escape[2]}")
+            return MonitorResult(0.0, 0.0, "stop", ttc, reason)
+        if moving and v == 0.0 and w == 0.0:  # a stopped robot: is something coming at it?
+            escape = self._yield(pose, pts, vel, free)
+            if escape is not None:
+                return MonitorResult(escape[0], escape[1], "yield", math.inf,
+                                     f"a moving obstacle would hit the stopped robot: "
+                                     f"{escape[2]}")
         slow_step = self._first_step(clearance, cfg.slowdown_margin)
         if slow_step is None:
             return MonitorResult(float(v), float(w), "none", math.inf, "clear")
@@ -202,24 +254,66 @@ class CollisionMonitor:
             v_slow, w_slow = float(np.clip(v, -cap_v, cap_v)), float(np.clip(w, -cap_w, cap_w))
         step = (abs(v) + abs(w) * self.footprint.circumscribed_radius) * cfg.sim_dt  # [m]
         candidates = clearance.min(axis=0) <= cfg.stop_margin + step  # (M',)
-        slowed = self._clearance(pose, v_slow, w_slow, pts[candidates])
+        slowed = self._clearance(pose, v_slow, w_slow, pts[candidates], vel[candidates])
         restop = self._first_step(slowed, cfg.stop_margin)
         if restop is not None:
-            return MonitorResult(0.0, 0.0, "stop", math.inf,
-                                 f"the slowed command still comes within {cfg.stop_margin} m "
-                                 f"in {float(self._t[restop]):.2f} s")
+            reason = (f"the slowed command still comes within {cfg.stop_margin} m in "
+                      f"{float(self._t[restop]):.2f} s")
+            if moving:
+                escape = self._yield(pose, pts, vel, free)
+                if escape is not None:
+                    return MonitorResult(escape[0], escape[1], "yield", math.inf,
+                                         f"{reason}; a moving obstacle would hit the stopped "
+                                         f"robot: {escape[2]}")
+            return MonitorResult(0.0, 0.0, "stop", math.inf, reason)
         return MonitorResult(float(v_slow), float(w_slow), "slowdown", math.inf,
                              f"point(s) within {cfg.slowdown_margin} m of the footprint in "
                              f"{float(self._t[slow_step]):.2f} s: speed x "
                              f"{cfg.slowdown_ratio}"
                              + ("" if cfg.slowdown_limits is None else " of the limits"))
 
+    # ------------------------------------------------------------------------------- yield
+    def _yield(self, pose: np.ndarray, pts: np.ndarray, vel: np.ndarray, free
+               ) -> tuple[float, float, str] | None:
+        """An escape command (v, w, why) when the stopped robot would be hit by a moving point
+        within yield_horizon and a command keeps clear longer; None: stopping is as good.
+        pts, vel: (M, 2) points [m] and velocities [m/s]."""
+        cfg = self.config
+        if cfg.escape_limits is None or free is None:
+            return None
+        t = self._t_yield  # (Ky+1,)
+        standing = self._clearance(pose, 0.0, 0.0, pts, vel, t)  # (Ky+1, M)
+        stand_hit = self._first_step(standing, cfg.stop_margin)
+        if stand_hit is None:
+            return None
+        max_v, max_w = (float(m) for m in cfg.escape_limits)
+        commands = [(fv * max_v, fw * max_w) for fv in _ESCAPE_V for fw in _ESCAPE_W
+                    if (fv, fw) != (0.0, 0.0)]
+        poses = np.stack([self.simulate(pose, cv, cw, t) for cv, cw in commands])  # (C, Ky+1, 3)
+        clear = np.asarray(free(poses.reshape(-1, 3)), dtype=bool).reshape(len(commands), -1)
+        best, best_key = None, (stand_hit, float(standing.min()))
+        for i, (cv, cw) in enumerate(commands):
+            if not clear[i].all():
+                continue
+            c = self._clearance(pose, cv, cw, pts, vel, t)  # (Ky+1, M)
+            hit = self._first_step(c, cfg.stop_margin)
+            key = (len(t) if hit is None else hit, float(c.min()))
+            if key > best_key:
+                best, best_key = i, key
+        if best is None:
+            return None
+        cv, cw = commands[best]
+        self.last_escape = poses[best]
+        when = "never" if best_key[0] >= len(t) else f"in {float(t[best_key[0]]):.2f} s"
+        return cv, cw, (f"escape v={cv:.2f} m/s, w={cw:.2f} rad/s (touched {when}; standing: "
+                        f"in {float(t[stand_hit]):.2f} s)")
+
     # ---------------------------------------------------------------------------- geometry
-    def simulate(self, pose, v: float, w: float) -> np.ndarray:
-        """(K+1, 3) poses x [m], y [m], yaw [rad] of the unicycle at (v, w) at times
-        0, sim_dt, ..., K sim_dt (exact arcs; straight when |w| is tiny)."""
+    def simulate(self, pose, v: float, w: float, t: np.ndarray | None = None) -> np.ndarray:
+        """(K+1, 3) poses x [m], y [m], yaw [rad] of the unicycle at (v, w) at times t (K+1,)
+        [s] (default 0, sim_dt, ..., K sim_dt; exact arcs; straight when |w| is tiny)."""
         x0, y0, yaw0 = (float(c) for c in pose)
-        t = self._t  # (K+1,)
+        t = self._t if t is None else t  # (K+1,)
         yaw = yaw0 + w * t
         if abs(w) < _STRAIGHT_W:
             x = x0 + v * t * math.cos(yaw0)
@@ -229,14 +323,20 @@ class CollisionMonitor:
             y = y0 - v / w * (np.cos(yaw) - math.cos(yaw0))
         return np.stack([x, y, yaw], axis=-1)
 
-    def _clearance(self, pose, v: float, w: float, pts: np.ndarray) -> np.ndarray:
+    def _clearance(self, pose, v: float, w: float, pts: np.ndarray, vel: np.ndarray | None = None,
+                   t: np.ndarray | None = None) -> np.ndarray:
         """(K+1, M) distance [m] from each point to the footprint at each simulated pose, 0
         inside it. For a polygon, ``inf`` where the point is farther than slowdown_margin from
-        the circumscribed circle (too far to matter, not computed). pts: (M, 2) world points."""
-        poses = self.simulate(pose, v, w)  # (K+1, 3)
+        the circumscribed circle (too far to matter, not computed). pts: (M, 2) world points,
+        vel: (M, 2) [m/s] their velocities (None: static), t: (K+1,) [s] step times."""
+        t = self._t if t is None else t
+        poses = self.simulate(pose, v, w, t)  # (K+1, 3)
         c, s = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]  # (K+1, 1)
         dx = pts[None, :, 0] - poses[:, 0:1]  # (K+1, M)
         dy = pts[None, :, 1] - poses[:, 1:2]
+        if vel is not None and np.any(vel):  # a moving point is at p + v t at step time t
+            dx = dx + t[:, None] * vel[None, :, 0]
+            dy = dy + t[:, None] * vel[None, :, 1]
         if self.footprint.radius is not None:
             return np.maximum(np.hypot(dx, dy) - self.footprint.radius, 0.0)
         clearance = np.full(dx.shape, np.inf)

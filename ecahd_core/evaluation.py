@@ -30,8 +30,9 @@ Beyond Table III, for maps that do not know every obstacle (issues 9 and 11):
 - Contact steps by kind: the simulator's ``collision_detail`` records (one per contact step,
   "wall" | "static_obstacle" | "moving_obstacle"), counted per kind; None when the recording
   has no ``collision_detail`` topic (older bags), 0 when it has one without contacts.
-- Monitor stops / slowdowns: control ticks whose cmd_vel the collision monitor stopped or
-  slowed ("monitor" of the "control" record); blocked ticks: control ticks with reason
+- Monitor stops / slowdowns / yields: control ticks whose cmd_vel the collision monitor
+  stopped, slowed, or replaced by an escape from a moving obstacle ("monitor" of the
+  "control" record); blocked ticks: control ticks with reason
   "blocked" (the local plan is in collision; the robot waits for a new global plan).
 - Global plans: the global planner's records ("sd", "astar", "fd", "fallback_astar"): the
   first plan of the goal and every replan (SD replans at each waypoint); fallbacks: the
@@ -98,7 +99,7 @@ class EpisodeData:
             "moving_obstacle"; ``collision_detail``); None: not recorded.
         control_reasons: (C,) each control tick's reason ("follow", "blocked", ...).
         control_monitor: (C,) each control tick's collision monitor action ("none",
-            "slowdown", "stop").
+            "slowdown", "stop", "yield").
         control_wall: (C,) [s, wall clock] when each control tick published its cmd_vel (NaN:
             not recorded).
     """
@@ -146,6 +147,7 @@ class EpisodeMetrics:
     contact_steps_moving: int | None = None
     monitor_stops: int = 0  # control ticks the collision monitor stopped
     monitor_slowdowns: int = 0
+    monitor_yields: int = 0  # control ticks it drove an escape from a moving obstacle
     blocked_ticks: int = 0  # control ticks with reason "blocked"
     global_plans: int = 0  # sd / astar / fd / fallback_astar records: first plan + replans
     fallbacks: int = 0  # fallback_astar records
@@ -177,6 +179,7 @@ class Summary:
     moving_contact_episodes: int | None = None
     monitor_stops: float = 0.0  # means per episode
     monitor_slowdowns: float = 0.0
+    monitor_yields: float = 0.0
     blocked_ticks: float = 0.0
     global_plans: float = 0.0
     fallbacks: float = 0.0
@@ -263,6 +266,7 @@ def evaluate_episode(data: EpisodeData, *, index: int = 0, grid: GridMap | None 
         contact_steps_moving=None if kinds is None else kinds.count("moving_obstacle"),
         monitor_stops=list(data.control_monitor).count("stop"),
         monitor_slowdowns=list(data.control_monitor).count("slowdown"),
+        monitor_yields=list(data.control_monitor).count("yield"),
         blocked_ticks=list(data.control_reasons).count("blocked"),
         global_plans=sum(1 for s in data.timing_stages if s in PLAN_STAGES),
         fallbacks=sum(1 for s in data.timing_stages if s == FALLBACK_STAGE),
@@ -359,6 +363,7 @@ def summarize(metrics: list[EpisodeMetrics], *, control_ms=None, intervals_ms=No
         static_contact_episodes=_episodes_with(metrics, "contact_steps_static"),
         moving_contact_episodes=_episodes_with(metrics, "contact_steps_moving"),
         monitor_stops=mean("monitor_stops"), monitor_slowdowns=mean("monitor_slowdowns"),
+        monitor_yields=mean("monitor_yields"),
         blocked_ticks=mean("blocked_ticks"), global_plans=mean("global_plans"),
         fallbacks=mean("fallbacks"), time_to_goal_s=float(np.mean(to_goal)) if to_goal else None,
         **pooled)
@@ -462,7 +467,7 @@ def markdown_table(summary: Summary, metrics: list[EpisodeMetrics], *,
                      f"{m.control_steps} | {m.dd_calls} | {_fmt(m.control_ms_p50, 2)} / "
                      f"{_fmt(m.control_ms_p99, 2)} |")
     lines += ["", _safety_paragraph(summary), "",
-              "| Episode | Contact steps wall / static / moving | Monitor stops / slowdowns "
+              "| Episode | Contact steps wall / static / moving | Monitor stops / slowdowns / yields "
               "| Blocked ticks | Global plans | Fallbacks | Time to goal [s] "
               "| cmd_vel interval p50 / p99 [ms] | Jitter p99 [ms] |",
               "|---:|---|---|---:|---:|---:|---:|---:|---:|"]
@@ -470,7 +475,8 @@ def markdown_table(summary: Summary, metrics: list[EpisodeMetrics], *,
         contacts = " / ".join(_fmt(c, 0) for c in (m.contact_steps_wall,
                                                    m.contact_steps_static,
                                                    m.contact_steps_moving))
-        lines.append(f"| {m.index} | {contacts} | {m.monitor_stops} / {m.monitor_slowdowns} | "
+        lines.append(f"| {m.index} | {contacts} | {m.monitor_stops} / {m.monitor_slowdowns} / "
+                     f"{m.monitor_yields} | "
                      f"{m.blocked_ticks} | {m.global_plans} | {m.fallbacks} | "
                      f"{_fmt(m.time_to_goal_s, 1)} | {_fmt(m.cmd_interval_ms_p50, 2)} / "
                      f"{_fmt(m.cmd_interval_ms_p99, 2)} | {_fmt(m.cmd_jitter_ms_p99, 2)} |")
@@ -485,7 +491,8 @@ def _safety_paragraph(s: Summary) -> str:
                      + " / ".join(_fmt(k, 0) for k in kinds) + f" of {s.episodes}")
     return (f"Obstacles and replanning: {contacts}; per episode, means: "
             f"{s.monitor_stops:.1f} collision monitor stops, {s.monitor_slowdowns:.1f} "
-            f"slowdowns, {s.blocked_ticks:.1f} blocked control ticks, {s.global_plans:.1f} "
+            f"slowdowns, {s.monitor_yields:.1f} yields to moving obstacles, "
+            f"{s.blocked_ticks:.1f} blocked control ticks, {s.global_plans:.1f} "
             f"global plans (first + replans), {s.fallbacks:.1f} A* fallbacks; time to goal "
             f"{_fmt(s.time_to_goal_s, 1)} s of sim time (reaching episodes). cmd_vel "
             f"inter-publish interval (wall clock) p50 {_fmt(s.cmd_interval_ms_p50, 2)} ms, p99 "

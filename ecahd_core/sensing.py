@@ -17,6 +17,7 @@ import numpy as np
 from ecahd_core.errors import EcahdError
 from ecahd_core.local_costmap import LocalCostmap, LocalCostmapConfig
 from ecahd_core.maps import GridMap
+from ecahd_core.tracking import MotionTracker, TrackerConfig
 
 SCAN_MAX_BEAMS = 100_000  # a scan with more beams is rejected
 
@@ -87,9 +88,26 @@ def fuse_grid(static: GridMap, mask: np.ndarray, origin: tuple[float, float]) ->
                    occupied_threshold=static.occupied_threshold)
 
 
+@dataclass(frozen=True)
+class SeenObstacles:
+    """The latest scan's returns that are not on (or next to) the static map's obstacles, in
+    the world frame, with their estimated velocities: the collision monitor's input.
+
+    Attributes:
+        points: (M, 2) [m]; velocities: (M, 2) [m/s] (0: static or unknown);
+        stamp: [s] the scan's time.
+    """
+
+    points: np.ndarray
+    velocities: np.ndarray
+    stamp: float
+
+
 class LocalWorld:
     """The static map, its cost J and the scans: :meth:`add_scan` updates the rolling window and
-    the latest scan points; :meth:`fused` gives (GridMap, CostMap) with the window's marks,
+    the latest unmapped scan points with their velocities (:attr:`seen`, one object replaced
+    whole, so a reader on another thread never sees points and velocities of two scans);
+    :meth:`fused` gives (GridMap, CostMap) with the window's marks,
     recomputed only when a scan changed the window and at most every ``min_fuse_interval`` s
     (the CostMap costs about 75 ms on a 2000 x 2000 map).
 
@@ -97,17 +115,18 @@ class LocalWorld:
         grid: the static GridMap; cost: its :class:`~ecahd_core.cost.CollisionCost`.
         config: the window's LocalCostmapConfig.
         offset: the sensor's (x, y, yaw) on base_link.
+        tracker: the MotionTracker settings for the unmapped points' velocities.
     """
 
     def __init__(self, grid: GridMap, cost, config: LocalCostmapConfig | None = None, *,
-                 offset=(0.0, 0.0, 0.0), min_fuse_interval: float = 0.2) -> None:
+                 offset=(0.0, 0.0, 0.0), min_fuse_interval: float = 0.2,
+                 tracker: TrackerConfig | None = None) -> None:
         self.grid, self.cost = grid, cost
         self.window = LocalCostmap.for_map(grid, config)
         self.offset = tuple(float(v) for v in offset)
         self.min_fuse_interval = min_fuse_interval
-        self.points = np.zeros((0, 2))  # (M, 2) [m] the latest scan's returns that are not on
-        #   (or next to) the static map's obstacles, world frame: the collision monitor's input
-        self.points_stamp: float | None = None
+        self.tracker = MotionTracker(tracker)
+        self.seen: SeenObstacles | None = None  # None until the first scan
         self._fused = (grid, cost.costmap)
         self._dirty = False
         self._fused_at = -math.inf
@@ -123,8 +142,8 @@ class LocalWorld:
         points = scan_points(pose, scan, self.offset)
         # returns from the static map's obstacles are known: the planner and the exact checker
         # keep the footprint off them; the collision monitor guards against the rest
-        self.points = points[~self.window.is_known(points)]
-        self.points_stamp = scan.stamp
+        points = points[~self.window.is_known(points)]
+        self.seen = SeenObstacles(points, self.tracker.update(points, scan.stamp), scan.stamp)
         mask = self.window.obstacle_mask()
         if before.shape != mask.shape or not np.array_equal(before, mask) \
                 or self.window.origin != self._window_origin:
@@ -132,6 +151,14 @@ class LocalWorld:
         self._window_origin = self.window.origin
 
     _window_origin: tuple[float, float] | None = None
+
+    def free(self, poses, footprint) -> np.ndarray:
+        """(N, 3) poses x [m], y [m], yaw [rad] -> (N,) bool: ``footprint`` placed there is
+        clear of the static map by the exact checker (the collision monitor's check of its
+        escape commands; the unmapped obstacles are the monitor's own points)."""
+        from ecahd_core.collision import DEFAULT_TOLERANCE, pose_depths
+
+        return pose_depths(poses, footprint, self.grid) <= DEFAULT_TOLERANCE
 
     @property
     def marked(self) -> bool:

@@ -246,9 +246,10 @@ def format_table(result: NavigationBenchResult) -> str:
                v.summary.get("moving_contact_episodes"), 0)
          + ("" if v.summary.get("static_contact_episodes") is None
             else f" of {v.summary['episodes']}") for v in ours])
-    row("Collision monitor stops / slowdowns [control ticks / episode]",
+    row("Collision monitor stops / slowdowns / yields [control ticks / episode]",
         [_pair(v.summary.get("monitor_stops"), v.summary.get("monitor_slowdowns"), 1)
-         for v in ours])
+         + (" / -" if v.summary.get("monitor_yields") is None
+            else f" / {v.summary['monitor_yields']:.1f}") for v in ours])
     row("Global plans (first + replans) / A* fallbacks [per episode]",
         [_pair(v.summary.get("global_plans"), v.summary.get("fallbacks"), 1) for v in ours])
     row("Time to goal [s of sim time, reaching episodes]",

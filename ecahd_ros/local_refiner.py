@@ -61,6 +61,7 @@ import threading
 import time
 from collections import deque
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 from geometry_msgs.msg import Point, Twist, TwistStamped
@@ -132,6 +133,11 @@ PARAMETERS = [
                                              "max_v and max_w"),
     ParamSpec("monitor_source_timeout", 0.5, "[s] scans older than this (after the first) stop "
                                              "the robot"),
+    ParamSpec("monitor_yield", True, "when the monitor stops the robot where a moving obstacle "
+                                     "(tracked from the scans) would hit it, drive the escape "
+                                     "command that stays clear longest (static map checked)"),
+    ParamSpec("monitor_yield_horizon", 2.0, "[s] how far ahead moving obstacles are predicted "
+                                            "for yielding"),
     *shared("seed", "torch_threads"),
 ]
 POSE_HISTORY = 1.0  # [s] of odometry poses kept to place scans by their stamps
@@ -179,6 +185,8 @@ class LocalRefinerParams:
     monitor_slowdown_margin: float
     monitor_slowdown_ratio: float
     monitor_source_timeout: float
+    monitor_yield: bool
+    monitor_yield_horizon: float
     seed: int
     torch_threads: int
 
@@ -190,7 +198,8 @@ class LocalRefinerParams:
                              "clearance_margin",
                              "polish_steps", "prepare_ahead", "obstacle_persistence")
         require_positive(self, "local_costmap_size", "local_costmap_rate",
-                         "monitor_time_to_collision", "monitor_source_timeout")
+                         "monitor_time_to_collision", "monitor_source_timeout",
+                         "monitor_yield_horizon")
         require(0 < self.monitor_slowdown_ratio <= 1, "monitor_slowdown_ratio",
                 self.monitor_slowdown_ratio, "in (0, 1]")
         require(0 <= self.monitor_stop_margin <= self.monitor_slowdown_margin,
@@ -221,7 +230,9 @@ class LocalRefinerParams:
             slowdown_ratio=self.monitor_slowdown_ratio,
             source_timeout=self.monitor_source_timeout,
             # the controller ramps from the command sent: cap, do not scale again each tick
-            slowdown_limits=(self.max_v, self.max_w))
+            slowdown_limits=(self.max_v, self.max_w),
+            escape_limits=(self.max_v, self.max_w) if self.monitor_yield else None,
+            yield_horizon=self.monitor_yield_horizon)
 
     @property
     def scan_offset(self) -> tuple[float, float, float]:
@@ -292,7 +303,8 @@ class LocalRefiner(Node):
             from ecahd_core.collision_monitor import CollisionMonitor
 
             self.monitor = CollisionMonitor(self.footprint, p.monitor_config())
-        self.counters = {"monitor_stop": 0, "monitor_slowdown": 0, "blocked": 0,
+        self.counters = {"monitor_stop": 0, "monitor_slowdown": 0, "monitor_yield": 0,
+                         "blocked": 0,
                          "rechecks_invalidated": 0, "scans": 0}
         self._cmd_type = TwistStamped if p.enable_stamped_cmd_vel else Twist
         self._cmd_pub = self.create_publisher(self._cmd_type, "cmd_vel", STREAM_QOS)
@@ -498,9 +510,12 @@ class LocalRefiner(Node):
             pose = self.runner.pose
         v, w, action = cmd.v, cmd.w, "none"
         world = self.world
-        if self.monitor is not None and world is not None and world.points_stamp is not None \
-                and pose is not None:  # the last line of defence, once scans flow
-            guarded = self.monitor.filter(pose, v, w, world.points, world.points_stamp, now)
+        seen = None if world is None else world.seen
+        if self.monitor is not None and seen is not None and pose is not None:
+            # the last line of defence, once scans flow
+            guarded = self.monitor.filter(pose, v, w, seen.points, seen.stamp, now,
+                                          velocities=seen.velocities,
+                                          free=partial(world.free, footprint=self.footprint))
             v, w, action = guarded.v, guarded.w, guarded.action
             if action != "none":
                 self.counters[f"monitor_{action}"] += 1

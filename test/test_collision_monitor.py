@@ -199,3 +199,72 @@ def test_monitor_benchmark_small(tmp_path, capsys):
     assert result["filter"]["speedup"] > 0 and result["update"]["speedup"] is None
     printed = capsys.readouterr().out
     assert "CollisionMonitor.filter" in printed and "update + fused_costmap" in printed
+
+
+# ------------------------------------------------------------------ moving obstacles, yielding
+CIRCLE = make_footprint("circle")  # radius 0.4 m
+
+
+def cylinder_arc(cx: float, cy: float, r: float = 0.2, n: int = 9) -> np.ndarray:
+    """(n, 2) points on the half of a cylinder (centre cx, cy, radius r) facing the origin."""
+    facing = math.atan2(-cy, -cx)
+    a = facing + np.linspace(-math.pi / 2, math.pi / 2, n)
+    return np.stack([cx + r * np.cos(a), cy + r * np.sin(a)], axis=1)
+
+
+def yielding(**config) -> CollisionMonitor:
+    return CollisionMonitor(CIRCLE, CollisionMonitorConfig(escape_limits=(0.5, 1.5), **config))
+
+
+def test_a_cylinder_coming_at_a_stopped_robot_makes_it_back_off_where_the_map_allows():
+    # cylinder (r 0.2) centred 1.0 m left of the robot, coming at it at 0.4 m/s: the stopped
+    # robot (r 0.4) is touched when the gap 1.0 - 0.6 - 0.4 t reaches 0.02 m, at t ~ 0.95 s
+    pts = cylinder_arc(0.0, 1.0)
+    vel = np.tile([0.0, -0.4], (len(pts), 1))
+    free_everywhere = lambda poses: np.ones(len(poses), dtype=bool)  # noqa: E731
+    result = yielding().filter(ORIGIN, 0.0, 0.0, pts, 0.0, 0.0, velocities=vel,
+                               free=free_everywhere)
+    assert result.action == "yield" and abs(result.v) > 0
+    assert "standing: in 1.00 s" in result.reason  # first 0.1 s step with gap <= 0.02 m
+    # a wall behind (x < 0 refused by the static map): the escape goes forward
+    no_reverse = lambda poses: poses[:, 0] >= -1e-9  # noqa: E731
+    forward = yielding().filter(ORIGIN, 0.0, 0.0, pts, 0.0, 0.0, velocities=vel,
+                                free=no_reverse)
+    assert forward.action == "yield" and forward.v > 0
+    # boxed in (every move refused): stop, as without yielding
+    boxed = lambda poses: np.hypot(poses[:, 0], poses[:, 1]) < 1e-9  # noqa: E731
+    stuck = yielding().filter(ORIGIN, 0.0, 0.0, pts, 0.0, 0.0, velocities=vel, free=boxed)
+    assert (stuck.v, stuck.w) == (0.0, 0.0)
+
+
+def test_no_yield_without_limits_or_map_check_or_for_static_points():
+    pts = cylinder_arc(0.0, 1.0)
+    vel = np.tile([0.0, -0.4], (len(pts), 1))
+    free = lambda poses: np.ones(len(poses), dtype=bool)  # noqa: E731
+    plain = CollisionMonitor(CIRCLE)  # escape_limits None: Nav2's stop
+    assert plain.filter(ORIGIN, 0.0, 0.0, pts, 0.0, 0.0, velocities=vel,
+                        free=free).action != "yield"
+    assert yielding().filter(ORIGIN, 0.0, 0.0, pts, 0.0, 0.0, velocities=vel).action != "yield"
+    # the same points standing still: nothing comes at the robot
+    still = yielding().filter(ORIGIN, 0.0, 0.0, pts, 0.0, 0.0, free=free)
+    assert still.action == "none"
+
+
+def test_a_crossing_cylinder_stops_a_robot_whose_path_it_will_cross():
+    # the robot drives +x at 0.5 m/s; a cylinder (r 0.2) at (0.8, -0.8) crosses towards +y at
+    # 0.5 m/s. Static, it never comes closer than 0.25 m within 1 s (robot at (0.5, 0): 0.854 -
+    # 0.6): a slowdown at most. Predicted, the centres are sqrt(2) (0.8 - 0.5 t) apart, within
+    # 0.6 + 0.02 m from t = 0.72 s: stop
+    pts = cylinder_arc(0.8, -0.8)
+    vel = np.tile([0.0, 0.5], (len(pts), 1))
+    monitor = CollisionMonitor(CIRCLE)
+    assert monitor.filter(ORIGIN, 0.5, 0.0, pts, 0.0, 0.0).action != "stop"
+    predicted = monitor.filter(ORIGIN, 0.5, 0.0, pts, 0.0, 0.0, velocities=vel)
+    assert predicted.action == "stop"
+    assert predicted.min_time_to_collision == pytest.approx(0.8)  # first 0.1 s step >= 0.72
+
+
+def test_velocities_must_match_the_points():
+    with pytest.raises(EcahdError, match="velocities"):
+        yielding().filter(ORIGIN, 0.0, 0.0, cylinder_arc(0.0, 1.0), 0.0, 0.0,
+                          velocities=np.zeros((2, 2)))

@@ -235,7 +235,7 @@ def test_split_episodes_carries_contact_kinds_and_control_records():
     assert s.monitor_stops == pytest.approx(0.5) and s.global_plans == pytest.approx(0.5)
     table = markdown_table(s, ms)
     assert "wall / static-obstacle / moving-obstacle contact: 0 / 1 / 1 of 2" in table
-    assert "| 0 | 0 / 2 / 0 | 1 / 0 | 1 | 1 | 0 |" in table
+    assert "| 0 | 0 / 2 / 0 | 1 / 0 / 0 | 1 | 1 | 0 |" in table
     # no collision_detail in the recording: kinds None; recorded but empty: no contacts
     assert split_episodes(goals, odom)[0].contact_kinds is None
     assert [ep.contact_kinds for ep in split_episodes(goals, odom, contacts=[])] == [[], []]
