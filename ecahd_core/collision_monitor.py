@@ -25,10 +25,10 @@ cart *will* be. A robot that stops in its way is hit all the same, so when the c
 stop and the stopped robot itself would be touched by a moving point within ``yield_horizon``
 seconds, the monitor **yields**: it tries a small set of commands (v in {-1, -1/2, 0, 1/2, 1}
 x max_v, w in {-1/2, 0, 1/2} x max_w of ``escape_limits``), drops every one whose simulated
-poses the caller's ``free`` check refuses (the static map: the scan points here are only
-the unmapped ones) or that comes within stop_margin of a point sooner than standing would,
-and sends the one that is touched latest (never, at best) and keeps the most clearance:
-often backing off out of the crossing, sometimes clearing it ahead. Standing still wins ties.
+pose the caller's ``free`` check refuses (the static map: the scan points here are only
+the unmapped ones) is cut there (the robot would wait before it), and sends the one touched
+in the fewest steps, then latest, then farthest from what comes at the horizon's end: often
+backing off out of the crossing, sometimes clearing it ahead. Standing still wins ties.
 
 The step k of the first stop hit gives ``min_time_to_collision`` = k sim_dt [s] (``inf`` when
 nothing is hit within the horizon). A point is never skipped between two steps as long as
@@ -90,7 +90,7 @@ class CollisionMonitorConfig:
     source_timeout: float = 2.0
     slowdown_limits: tuple[float, float] | None = None
     escape_limits: tuple[float, float] | None = None
-    yield_horizon: float = 2.0
+    yield_horizon: float = 3.0
 
     def __post_init__(self) -> None:
         for field in ("slowdown_limits", "escape_limits"):
@@ -276,13 +276,19 @@ class CollisionMonitor:
     def _yield(self, pose: np.ndarray, pts: np.ndarray, vel: np.ndarray, free
                ) -> tuple[float, float, str] | None:
         """An escape command (v, w, why) when the stopped robot would be hit by a moving point
-        within yield_horizon and a command keeps clear longer; None: stopping is as good.
-        pts, vel: (M, 2) points [m] and velocities [m/s]."""
+        within yield_horizon and a command does better; None: stopping is as good.
+        pts, vel: (M, 2) points [m] and velocities [m/s].
+
+        Each escape command drives until just before its first pose that ``free`` refuses and
+        waits there (the monitor re-judges every tick, so it never drives into the map); one
+        that cannot move a single step is dropped. Commands are ranked by, in order: fewer
+        steps within stop_margin of a point, the first such step later, more clearance at
+        the horizon's end (away from what comes); it must beat standing still."""
         cfg = self.config
         if cfg.escape_limits is None or free is None:
             return None
         t = self._t_yield  # (Ky+1,)
-        standing = self._clearance(pose, 0.0, 0.0, pts, vel, t)  # (Ky+1, M)
+        standing = self._clearance_at(np.tile(pose, (len(t), 1)), pts, vel, t)  # (Ky+1, M)
         stand_hit = self._first_step(standing, cfg.stop_margin)
         if stand_hit is None:
             return None
@@ -291,22 +297,31 @@ class CollisionMonitor:
                     if (fv, fw) != (0.0, 0.0)]
         poses = np.stack([self.simulate(pose, cv, cw, t) for cv, cw in commands])  # (C, Ky+1, 3)
         clear = np.asarray(free(poses.reshape(-1, 3)), dtype=bool).reshape(len(commands), -1)
-        best, best_key = None, (stand_hit, float(standing.min()))
+        best, best_key = None, self._escape_key(standing)
         for i, (cv, cw) in enumerate(commands):
-            if not clear[i].all():
+            blocked = np.flatnonzero(~clear[i])
+            stop_at = len(t) if len(blocked) == 0 else int(blocked[0])  # first refused step
+            if stop_at < 2:
                 continue
-            c = self._clearance(pose, cv, cw, pts, vel, t)  # (Ky+1, M)
-            hit = self._first_step(c, cfg.stop_margin)
-            key = (len(t) if hit is None else hit, float(c.min()))
+            driven = poses[i].copy()
+            driven[stop_at:] = driven[stop_at - 1]  # waits before the refused pose
+            key = self._escape_key(self._clearance_at(driven, pts, vel, t))
             if key > best_key:
-                best, best_key = i, key
+                best, best_key, self.last_escape = i, key, driven
         if best is None:
             return None
         cv, cw = commands[best]
-        self.last_escape = poses[best]
-        when = "never" if best_key[0] >= len(t) else f"in {float(t[best_key[0]]):.2f} s"
-        return cv, cw, (f"escape v={cv:.2f} m/s, w={cw:.2f} rad/s (touched {when}; standing: "
-                        f"in {float(t[stand_hit]):.2f} s)")
+        touched = -best_key[0]
+        return cv, cw, (f"escape v={cv:.2f} m/s, w={cw:.2f} rad/s (touched in {touched} of "
+                        f"{len(t)} steps; standing: from {float(t[stand_hit]):.2f} s)")
+
+    def _escape_key(self, clearance: np.ndarray) -> tuple[int, int, float]:
+        """Rank of an escape's (Ky+1, M) clearance: (-touched steps, first touched step (Ky+1
+        if none), clearance [m] at the last step); larger is better."""
+        touched = np.count_nonzero(clearance <= self.config.stop_margin, axis=1) \
+            >= self.config.min_points  # (Ky+1,)
+        first = int(np.argmax(touched)) if touched.any() else len(touched)
+        return -int(touched.sum()), first, float(clearance[-1].min(initial=math.inf))
 
     # ---------------------------------------------------------------------------- geometry
     def simulate(self, pose, v: float, w: float, t: np.ndarray | None = None) -> np.ndarray:
@@ -330,7 +345,11 @@ class CollisionMonitor:
         the circumscribed circle (too far to matter, not computed). pts: (M, 2) world points,
         vel: (M, 2) [m/s] their velocities (None: static), t: (K+1,) [s] step times."""
         t = self._t if t is None else t
-        poses = self.simulate(pose, v, w, t)  # (K+1, 3)
+        return self._clearance_at(self.simulate(pose, v, w, t), pts, vel, t)
+
+    def _clearance_at(self, poses: np.ndarray, pts: np.ndarray, vel: np.ndarray | None,
+                      t: np.ndarray) -> np.ndarray:
+        """:meth:`_clearance` for given poses (K+1, 3) at step times t (K+1,) [s]."""
         c, s = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]  # (K+1, 1)
         dx = pts[None, :, 0] - poses[:, 0:1]  # (K+1, M)
         dy = pts[None, :, 1] - poses[:, 1:2]

@@ -136,7 +136,7 @@ PARAMETERS = [
     ParamSpec("monitor_yield", True, "when the monitor stops the robot where a moving obstacle "
                                      "(tracked from the scans) would hit it, drive the escape "
                                      "command that stays clear longest (static map checked)"),
-    ParamSpec("monitor_yield_horizon", 2.0, "[s] how far ahead moving obstacles are predicted "
+    ParamSpec("monitor_yield_horizon", 3.0, "[s] how far ahead moving obstacles are predicted "
                                             "for yielding"),
     *shared("seed", "torch_threads"),
 ]

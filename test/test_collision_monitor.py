@@ -225,7 +225,7 @@ def test_a_cylinder_coming_at_a_stopped_robot_makes_it_back_off_where_the_map_al
     result = yielding().filter(ORIGIN, 0.0, 0.0, pts, 0.0, 0.0, velocities=vel,
                                free=free_everywhere)
     assert result.action == "yield" and abs(result.v) > 0
-    assert "standing: in 1.00 s" in result.reason  # first 0.1 s step with gap <= 0.02 m
+    assert "standing: from 1.00 s" in result.reason  # first 0.1 s step with gap <= 0.02 m
     # a wall behind (x < 0 refused by the static map): the escape goes forward
     no_reverse = lambda poses: poses[:, 0] >= -1e-9  # noqa: E731
     forward = yielding().filter(ORIGIN, 0.0, 0.0, pts, 0.0, 0.0, velocities=vel,
