@@ -14,7 +14,7 @@ Every command (v, w) is checked before it reaches the base:
    -> **stop**: v = w = 0. Like Nav2, rotation in place is not let through even when it alone
    would be collision free: a point that close means the scan, the pose or the plan is wrong,
    and the planner, not the filter, should decide how to get out.
-4. Else if at least ``min_points`` points come within ``slowdown_margin`` at some step ->
+4. Else if at least ``min_points`` static points come within ``slowdown_margin`` at some step ->
    **slowdown**: v and w are scaled by ``slowdown_ratio`` and the slowed command is checked
    again (step 3; stop if it fails).
 5. Else the command passes unchanged ("none").
@@ -27,8 +27,10 @@ seconds, the monitor **yields**: it tries a small set of commands (v in {-1, -1/
 x max_v, w in {-1/2, 0, 1/2} x max_w of ``escape_limits``), drops every one whose simulated
 pose the caller's ``free`` check refuses (the static map: the scan points here are only
 the unmapped ones) is cut there (the robot would wait before it), and sends the one touched
-in the fewest steps, then latest, then farthest from what comes at the horizon's end: often
-backing off out of the crossing, sometimes clearing it ahead. Standing still wins ties.
+in the fewest steps, then latest, then the last yield's command again (no dithering), then
+farthest from what comes at the horizon's end: often backing off out of the crossing,
+sometimes clearing it ahead. Standing still wins ties. Only static points slow the robot
+down: slowing near a moving one does not help (it may come from behind).
 
 The step k of the first stop hit gives ``min_time_to_collision`` = k sim_dt [s] (``inf`` when
 nothing is hit within the horizon). A point is never skipped between two steps as long as
@@ -168,6 +170,7 @@ class CollisionMonitor:
         self._t = np.arange(cfg.steps + 1) * cfg.sim_dt  # (K+1,) [s]
         self._t_yield = np.arange(cfg.yield_steps + 1) * cfg.sim_dt  # (Ky+1,) [s]
         self.last_escape: np.ndarray | None = None  # (Ky+1, 3) the last yield's poses
+        self._last_yield: tuple[float, float] | None = None  # its command (v, w)
 
     # ------------------------------------------------------------------------------ filter
     def filter(self, pose, v: float, w: float, points, points_stamp: float | None,
@@ -240,7 +243,10 @@ class CollisionMonitor:
                 return MonitorResult(escape[0], escape[1], "yield", math.inf,
                                      f"a moving obstacle would hit the stopped robot: "
                                      f"{escape[2]}")
-        slow_step = self._first_step(clearance, cfg.slowdown_margin)
+        # slowing down near something that moves does not help (it may be coming from behind,
+        # and is judged by its prediction above): only static points slow the robot
+        still = ~vel.any(axis=1)  # (M',)
+        slow_step = self._first_step(clearance[:, still], cfg.slowdown_margin)
         if slow_step is None:
             return MonitorResult(float(v), float(w), "none", math.inf, "clear")
         # slowdown, then check the slowed command again. Its poses lie on the same arc between
@@ -253,7 +259,8 @@ class CollisionMonitor:
             cap_v, cap_w = (cfg.slowdown_ratio * float(m) for m in cfg.slowdown_limits)
             v_slow, w_slow = float(np.clip(v, -cap_v, cap_v)), float(np.clip(w, -cap_w, cap_w))
         step = (abs(v) + abs(w) * self.footprint.circumscribed_radius) * cfg.sim_dt  # [m]
-        candidates = clearance.min(axis=0) <= cfg.stop_margin + step  # (M',)
+        # (a moving point is where it is at a time, not on the arc: every one is re-checked)
+        candidates = (clearance.min(axis=0) <= cfg.stop_margin + step) | ~still  # (M',)
         slowed = self._clearance(pose, v_slow, w_slow, pts[candidates], vel[candidates])
         restop = self._first_step(slowed, cfg.stop_margin)
         if restop is not None:
@@ -297,7 +304,7 @@ class CollisionMonitor:
                     if (fv, fw) != (0.0, 0.0)]
         poses = np.stack([self.simulate(pose, cv, cw, t) for cv, cw in commands])  # (C, Ky+1, 3)
         clear = np.asarray(free(poses.reshape(-1, 3)), dtype=bool).reshape(len(commands), -1)
-        best, best_key = None, self._escape_key(standing)
+        best, best_key = None, self._escape_key(standing, False)
         for i, (cv, cw) in enumerate(commands):
             blocked = np.flatnonzero(~clear[i])
             stop_at = len(t) if len(blocked) == 0 else int(blocked[0])  # first refused step
@@ -305,23 +312,29 @@ class CollisionMonitor:
                 continue
             driven = poses[i].copy()
             driven[stop_at:] = driven[stop_at - 1]  # waits before the refused pose
-            key = self._escape_key(self._clearance_at(driven, pts, vel, t))
+            key = self._escape_key(self._clearance_at(driven, pts, vel, t),
+                                   (cv, cw) == self._last_yield)
             if key > best_key:
                 best, best_key, self.last_escape = i, key, driven
         if best is None:
+            self._last_yield = None
             return None
         cv, cw = commands[best]
+        self._last_yield = (cv, cw)
         touched = -best_key[0]
         return cv, cw, (f"escape v={cv:.2f} m/s, w={cw:.2f} rad/s (touched in {touched} of "
                         f"{len(t)} steps; standing: from {float(t[stand_hit]):.2f} s)")
 
-    def _escape_key(self, clearance: np.ndarray) -> tuple[int, int, float]:
+    def _escape_key(self, clearance: np.ndarray, previous: bool) -> tuple[int, int, bool, float]:
         """Rank of an escape's (Ky+1, M) clearance: (-touched steps, first touched step (Ky+1
-        if none), clearance [m] at the last step); larger is better."""
+        if none), ``previous`` (the command of the last yield: kept on a tie, so the robot
+        does not dither between two escapes as the obstacle moves), clearance [m] at the last
+        step); larger is better."""
         touched = np.count_nonzero(clearance <= self.config.stop_margin, axis=1) \
             >= self.config.min_points  # (Ky+1,)
         first = int(np.argmax(touched)) if touched.any() else len(touched)
-        return -int(touched.sum()), first, float(clearance[-1].min(initial=math.inf))
+        return (-int(touched.sum()), first, previous,
+                float(clearance[-1].min(initial=math.inf)))
 
     # ---------------------------------------------------------------------------- geometry
     def simulate(self, pose, v: float, w: float, t: np.ndarray | None = None) -> np.ndarray:

@@ -268,3 +268,14 @@ def test_velocities_must_match_the_points():
     with pytest.raises(EcahdError, match="velocities"):
         yielding().filter(ORIGIN, 0.0, 0.0, cylinder_arc(0.0, 1.0), 0.0, 0.0,
                           velocities=np.zeros((2, 2)))
+
+
+def test_a_cylinder_keeping_pace_beside_the_robot_does_not_slow_it_down():
+    # a cylinder 0.85 m to the left (0.25 m from the footprint, inside the 0.3 m slowdown
+    # margin) moving +x with the robot at 0.5 m/s: static, it slows the robot; moving, slowing
+    # would only let it drift ahead, and it never comes closer: the command passes
+    pts = cylinder_arc(0.0, 0.85)
+    monitor = CollisionMonitor(CIRCLE)
+    assert monitor.filter(ORIGIN, 0.5, 0.0, pts, 0.0, 0.0).action == "slowdown"
+    vel = np.tile([0.5, 0.0], (len(pts), 1))
+    assert monitor.filter(ORIGIN, 0.5, 0.0, pts, 0.0, 0.0, velocities=vel).action == "none"
