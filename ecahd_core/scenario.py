@@ -322,7 +322,8 @@ def generate_scenario(grid, footprint, stops, *, static: int, moving: int, seed:
     with all of them in place (A* with clearance on the rasterised map, every obstacle grown
     by ``MARK_GROWTH`` cells as the robot's scan marks can grow it); moving cylinders
     (radius 0.15-0.2 m, 0.3-0.5 m/s) cross the route at right angles, from wall to wall (at
-    most 1.5 m each side), and only where the robot can get by at one end of their run. Nothing within ``keep_clear`` m of a stop, obstacles at least
+    most 1.5 m each side), and only where the robot can get by at one end of their run.
+    Nothing within ``keep_clear`` m of a stop (a moving one's whole run), obstacles at least
     ``spacing`` m apart (their paths' midpoints for moving ones). When an obstacle cannot be
     placed in ``tries`` attempts: ScenarioError if ``strict``, else the scenario keeps the
     ones placed so far of that kind (1 m maze corridors rarely take 5 blocking boxes that all
@@ -404,6 +405,10 @@ def generate_scenario(grid, footprint, stops, *, static: int, moving: int, seed:
                 ends.append(candidates[i] + sign * d * normal)
             if np.linalg.norm(ends[0] - ends[1]) < 0.6:
                 continue
+            # its whole run keeps clear of the stops (the robot waits near them: a run through
+            # a start would hit a robot that has not moved yet)
+            if _distance_to_segment(stops, ends[0], ends[1]).min() < keep_clear:
+                continue
             # it must let the robot by at one end of its run at least: a cylinder shuttling
             # across a corridor no wider than the robot plus itself blocks it for good
             statics = [o for o in obstacles if not o.moving]
@@ -424,6 +429,13 @@ def generate_scenario(grid, footprint, stops, *, static: int, moving: int, seed:
                                     f"{kinds.count('moving') + 1} of {moving} across the route")
             break
     return GeneratedScenario(tuple(obstacles), tuple(kinds), route)
+
+
+def _distance_to_segment(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(K,) distance [m] from each of the points (K, 2) to the segment a-b."""
+    ab = b - a
+    u = np.clip(((points - a) @ ab) / max(float(ab @ ab), 1e-18), 0.0, 1.0)  # (K,)
+    return np.linalg.norm(points - (a + u[:, None] * ab), axis=1)
 
 
 def _centre(o: Obstacle) -> np.ndarray:

@@ -69,6 +69,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", default=None, help="write per-episode records and means here")
     p.add_argument("--md", default=None, help="write the markdown table here")
     p.add_argument("--png", default=None, help="write the trajectories figure here")
+    p.add_argument("--scenarios", default=None, metavar="FOLDER",
+                   help="draw each episode's obstacles from FOLDER/episode_<i>.yaml (the "
+                        "scenarios folder of `ecahd demo` / `ecahd bench navigation`)")
     p.add_argument("--snapshot", type=float, default=None, metavar="T",
                    help="instead: draw what the robot knew T s (sim time) after the first goal "
                         "(map, local costmap, scan, plans, driven path) into --png")
@@ -150,15 +153,19 @@ def evaluate_bag(path, *, robot: str = "circle", map_name: str = "recorded",
                                            nominal_interval_ms=nominal_interval_ms))
 
 
-def draw_trajectories(result: BagEvaluation, path, *, title: str = "") -> Path:
+def draw_trajectories(result: BagEvaluation, path, *, title: str = "",
+                      scenarios: list | None = None) -> Path:
     """Fig. 4 style: every episode's driven path over the map, goals as stars, the poses the
-    exact checker finds in a wall in red."""
+    exact checker finds in a wall in red. ``scenarios``: per episode, the obstacles that were
+    not on the map (ecahd_core.scenario.Obstacle list, None for none), drawn in the episode's
+    colour: static ones filled, moving ones as their run (dashed) with their start outline."""
     from ecahd_core.collision import check_collision
     from ecahd_core.viz import pyplot, draw_map
 
     plt = pyplot()
     xmin, ymin, xmax, ymax = result.grid.bounds
-    fig, ax = plt.subplots(figsize=(8, 8 * (ymax - ymin) / max(xmax - xmin, 1e-9) + 0.6))
+    wide = 2.0 if len(result.metrics) > 6 else 0.0  # [in] room for the legend beside the map
+    fig, ax = plt.subplots(figsize=(8 + wide, 8 * (ymax - ymin) / max(xmax - xmin, 1e-9) + 0.6))
     draw_map(ax, result.grid)
     for ep, m in zip(result.episodes, result.metrics):
         color = COLORS[m.index % len(COLORS)]
@@ -175,9 +182,17 @@ def draw_trajectories(result: BagEvaluation, path, *, title: str = "") -> Path:
                 hit = report.dense_poses[report.colliding]
                 ax.plot(hit[:, 0], hit[:, 1], ".", color="red", ms=3)
         ax.plot(*ep.goal, marker="*", color="gold", mec=color, mew=1.5, ms=16)
+        if scenarios is not None and m.index < len(scenarios):
+            _draw_obstacles(ax, scenarios[m.index] or [], color)
+    if scenarios is not None and any(scenarios):
+        ax.fill([], [], color="0.5", alpha=0.55, label="obstacle not on the map")
+        ax.plot([], [], "--", color="0.4", label="moving obstacle's run")
     ax.plot([], [], ".", color="red", label="collision (exact check)")
     ax.plot([], [], "*", color="gold", mec="k", ms=12, ls="none", label="goal")
-    ax.legend(loc="best", fontsize=7, framealpha=0.8)
+    if len(result.metrics) > 6:  # many episodes: the legend beside the map, not over it
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7, framealpha=0.8)
+    else:
+        ax.legend(loc="best", fontsize=7, framealpha=0.8)
     s = result.summary
     ax.set_title(title or f"{len(result.metrics)} episodes: reward {s.episode_reward:.1f}, "
                           f"collision rate {s.collision_rate:.3f}%", fontsize=9)
@@ -189,10 +204,24 @@ def draw_trajectories(result: BagEvaluation, path, *, title: str = "") -> Path:
     return path
 
 
+def _draw_obstacles(ax, obstacles, color) -> None:
+    """Static obstacles filled, moving ones as the polyline they shuttle along."""
+    for o in obstacles:
+        poly = o.footprint(0.0)  # (K, 2) [m]
+        if o.moving:
+            run = np.asarray(o.path)
+            ax.plot(run[:, 0], run[:, 1], "--", color=color, lw=1.2, alpha=0.9)
+            ax.fill(poly[:, 0], poly[:, 1], fill=False, ec=color, lw=1.0)
+        else:
+            ax.fill(poly[:, 0], poly[:, 1], color=color, alpha=0.55, ec="k", lw=0.5)
+
+
 def write_outputs(result: BagEvaluation, bag, *, json_path=None, md_path=None,
-                  png_path=None, extra: dict | None = None, notes: str = "") -> str:
+                  png_path=None, extra: dict | None = None, notes: str = "",
+                  scenarios: list | None = None) -> str:
     """Write the requested files; returns the markdown table. ``extra``: more top-level keys
-    of the JSON; ``notes``: markdown appended to the table (in the return value too)."""
+    of the JSON; ``notes``: markdown appended to the table (in the return value too);
+    ``scenarios``: per episode, the obstacles not on the map, for the figure."""
     from ecahd_core.evaluation import markdown_table
 
     table = markdown_table(result.summary, result.metrics) + notes
@@ -207,7 +236,7 @@ def write_outputs(result: BagEvaluation, bag, *, json_path=None, md_path=None,
                                  "control step within 0.5 m of the goal, at most 800 steps; "
                                  "collision rate: % of sim steps in contact).\n\n" + table)
     if png_path:
-        draw_trajectories(result, png_path)
+        draw_trajectories(result, png_path, scenarios=scenarios)
     return table
 
 
@@ -290,6 +319,21 @@ def draw_snapshot(bag, at: float, path, *, map_name: str = "recorded") -> Path:
     return Path(path)
 
 
+def _read_scenarios(folder, episodes: int) -> list | None:
+    """Per episode, the obstacles of FOLDER/episode_<i>.yaml (None where there is no file);
+    None without a folder. A bad file raises ScenarioError naming it."""
+    if folder is None:
+        return None
+    from ecahd_core.errors import EcahdError
+    from ecahd_core.scenario import load_scenario
+
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise EcahdError(f"--scenarios {folder}: not a folder")
+    files = [folder / f"episode_{i}.yaml" for i in range(episodes)]
+    return [load_scenario(f) if f.is_file() else None for f in files]
+
+
 def run(args: argparse.Namespace) -> int:
     if args.snapshot is not None:
         if not args.png:
@@ -304,7 +348,8 @@ def run(args: argparse.Namespace) -> int:
                           control_period=args.control_period,
                           nominal_interval_ms=args.nominal_interval_ms)
     table = write_outputs(result, args.bag, json_path=args.json, md_path=args.md,
-                          png_path=args.png)
+                          png_path=args.png, scenarios=_read_scenarios(args.scenarios,
+                                                                        len(result.metrics)))
     print(table)
     for what, p in (("json", args.json), ("markdown", args.md), ("figure", args.png)):
         if p:

@@ -168,3 +168,21 @@ def test_a_bag_from_before_the_new_records_still_evaluates(tmp_path):
     s = result.summary
     assert s.static_contact_episodes is None and s.cmd_interval_ms_p50 is None
     assert s.global_plans == 1.5 and s.monitor_stops == 0.0
+
+
+def test_eval_bag_draws_the_episodes_obstacles(tmp_path, capsys):
+    from ecahd_core.scenario import Obstacle, write_scenario
+    from ecahd_ros.cli import main
+
+    bag, png = tmp_path / "bag", tmp_path / "t.png"
+    write_bag(bag)
+    folder = tmp_path / "scenarios"
+    write_scenario(folder / "episode_0.yaml", [
+        Obstacle("box", 1.5, 0.5, size=(0.3, 0.3)),
+        Obstacle("cylinder", 1.0, 0.2, radius=0.1, path=((1.0, 0.2), (1.0, 0.8)), speed=0.3)])
+    # episode 1 has no file: drawn without obstacles
+    assert main(["eval-bag", str(bag), "--png", str(png), "--scenarios", str(folder)]) == 0
+    assert png.stat().st_size > 1000
+    assert main(["eval-bag", str(bag), "--png", str(png), "--scenarios",
+                 str(tmp_path / "missing")]) == 2
+    assert "not a folder" in capsys.readouterr().err

@@ -270,6 +270,14 @@ def test_a_scanned_blockage_sends_the_detour_through_the_other_corridor():
                                           angle_increment=angles[1] - angles[0],
                                           range_min=0.1, range_max=8.0, stamp=0.0))
     fused, _ = world.fused(force=True)
+    # the collision monitor's input: the unmapped returns (the box, not the corridor's walls)
+    # with a velocity each (0: one scan, nothing known to move); the escape check reads the map
+    seen = world.seen
+    assert seen.stamp == 0.0 and seen.velocities.shape == seen.points.shape
+    assert len(seen.points) > 80 and np.allclose(seen.points[:, 0], 3.0, atol=1e-6)
+    assert not seen.velocities.any()
+    assert world.free(np.array([[2.0, 0.75, 0.0], [2.0, 1.2, 0.0]]), robot).tolist() == \
+        [True, False]  # the second overlaps the wall block above (y >= 1.5)
     # column x in [3.0, 3.1] blocked from y = 0 up to the wall block; the row next to the block
     # (y in [1.4, 1.5]) counts as the block's own (marks within one cell of a known obstacle)
     assert fused.occupied[:14, 30].all() and not grid.occupied[:14, 30].any()

@@ -129,3 +129,30 @@ def test_write_then_load_round_trips(tmp_path):
     obstacles = load_scenario(path)
     again = load_scenario(write_scenario(tmp_path / "out" / "copy.yaml", obstacles))
     assert again == obstacles
+
+
+def test_generated_scenarios_keep_goals_reachable_and_moving_runs_clear_of_the_stops():
+    from ecahd_core.astar import AStarPlanner, clearance_for_footprint, plan_from_pose
+    from ecahd_core.footprint import make_footprint
+    from ecahd_core.maps import load_map
+    from ecahd_core.scenario import MARK_GROWTH, generate_scenario, rasterize
+
+    grid, robot = load_map("maze2d-large"), make_footprint("circle")
+    stops = np.array([[1.5, 7.5], [10.5, 7.5], [10.5, 1.5]])  # corridor corners of the maze
+    a = generate_scenario(grid, robot, stops, static=2, moving=2, seed=3, strict=False)
+    b = generate_scenario(grid, robot, stops, static=2, moving=2, seed=3, strict=False)
+    assert [o.to_dict() for o in a.obstacles] == [o.to_dict() for o in b.obstacles]  # seeded
+    assert len(a.obstacles) == len(a.kinds) >= 1
+    # with every static obstacle in place (grown as scan marks grow it) each goal is reachable
+    statics = [o for o in a.obstacles if not o.moving]
+    planner = AStarPlanner(rasterize(grid, statics, grow=MARK_GROWTH),
+                           clearance_for_footprint(robot))
+    for s, g in zip(stops[:-1], stops[1:]):
+        assert len(plan_from_pose(planner, s, g)) >= 2
+    for o in a.obstacles:  # a moving one's whole run keeps keep_clear (1.2 m) from the stops
+        if not o.moving:
+            continue
+        run = np.asarray(o.path)
+        for t in np.linspace(0.0, 1.0, 21):
+            p = run[0] + t * (run[-1] - run[0])
+            assert np.linalg.norm(stops - p, axis=1).min() >= 1.2 - 1e-9
