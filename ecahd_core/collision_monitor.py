@@ -20,8 +20,8 @@ Every command (v, w) is checked before it reaches the base:
 5. Else the command passes unchanged ("none").
 
 Moving obstacles (beyond Nav2). Given each point's velocity (:mod:`ecahd_core.tracking`), a
-point is predicted at p + v t at step time t, so the monitor judges where a crossing person or
-cart *will* be. A robot that stops in its way is hit all the same, so when the command must
+point is predicted at p + v t at step time t, its clearance shrunk by ``prediction_growth`` t
+(the estimate's uncertainty), so the monitor judges where a crossing person or cart *will* be. A robot that stops in its way is hit all the same, so when the command must
 stop and the stopped robot itself would be touched by a moving point within ``yield_horizon``
 seconds, the monitor **yields**: it tries a small set of commands (v in {-1, -1/2, 0, 1/2, 1}
 x max_v, w in {-1/2, 0, 1/2} x max_w of ``escape_limits``), drops every one whose simulated
@@ -81,6 +81,9 @@ class CollisionMonitorConfig:
             moving obstacle; None: never yield (stop, as Nav2).
         yield_horizon: [s] how far ahead a moving point is predicted when judging whether the
             stopped robot would be hit, and the escape commands.
+        prediction_growth: [m/s] a moving point predicted t seconds ahead counts as this
+            times t closer (its velocity is an estimate: measured errors up to 0.1 m/s, and a
+            person may turn); 0 trusts the prediction.
     """
 
     time_to_collision: float = 1.0
@@ -93,6 +96,7 @@ class CollisionMonitorConfig:
     slowdown_limits: tuple[float, float] | None = None
     escape_limits: tuple[float, float] | None = None
     yield_horizon: float = 3.0
+    prediction_growth: float = 0.15
 
     def __post_init__(self) -> None:
         for field in ("slowdown_limits", "escape_limits"):
@@ -105,7 +109,7 @@ class CollisionMonitorConfig:
                 check_real(_OWNER, f"{field} {name}", value, zero_ok=False)
         for name in ("time_to_collision", "sim_dt", "slowdown_ratio", "yield_horizon"):
             check_real(_OWNER, name, getattr(self, name), zero_ok=False)
-        for name in ("slowdown_margin", "stop_margin", "source_timeout"):
+        for name in ("slowdown_margin", "stop_margin", "source_timeout", "prediction_growth"):
             check_real(_OWNER, name, getattr(self, name), zero_ok=True)
         if self.slowdown_ratio > 1:
             raise EcahdError(f"slowdown_ratio must be in (0, 1], got {self.slowdown_ratio!r}")
@@ -295,7 +299,11 @@ class CollisionMonitor:
         if cfg.escape_limits is None or free is None:
             return None
         t = self._t_yield  # (Ky+1,)
-        standing = self._clearance_at(np.tile(pose, (len(t), 1)), pts, vel, t)  # (Ky+1, M)
+        # only touching matters here (and the clearance left at the end, a tie-breaker): a
+        # point farther than a stop margin + 0.1 m from the circumscribed circle is "far"
+        reach = self.footprint.circumscribed_radius + cfg.stop_margin + 0.1  # [m]
+        standing = self._clearance_at(np.tile(pose, (len(t), 1)), pts, vel, t,
+                                      reach=reach)  # (Ky+1, M)
         stand_hit = self._first_step(standing, cfg.stop_margin)
         if stand_hit is None:
             return None
@@ -305,17 +313,21 @@ class CollisionMonitor:
         poses = np.stack([self.simulate(pose, cv, cw, t) for cv, cw in commands])  # (C, Ky+1, 3)
         clear = np.asarray(free(poses.reshape(-1, 3)), dtype=bool).reshape(len(commands), -1)
         best, best_key = None, self._escape_key(standing, False)
-        for i, (cv, cw) in enumerate(commands):
-            blocked = np.flatnonzero(~clear[i])
-            stop_at = len(t) if len(blocked) == 0 else int(blocked[0])  # first refused step
-            if stop_at < 2:
-                continue
-            driven = poses[i].copy()
-            driven[stop_at:] = driven[stop_at - 1]  # waits before the refused pose
-            key = self._escape_key(self._clearance_at(driven, pts, vel, t),
-                                   (cv, cw) == self._last_yield)
+        # each command drives until its first refused step and waits there
+        blocked = ~clear  # (C, Ky+1)
+        stop_at = np.where(blocked.any(axis=1), np.argmax(blocked, axis=1), len(t))  # (C,)
+        movable = np.flatnonzero(stop_at >= 2)
+        if len(movable) == 0:
+            self._last_yield = None
+            return None
+        steps = np.minimum(np.arange(len(t))[None, :], stop_at[movable, None] - 1)
+        driven = poses[movable[:, None], steps]  # (C', Ky+1, 3)
+        clearance = self._clearance_at(driven.reshape(-1, 3), pts, vel, np.tile(t, len(movable)),
+                                       reach=reach).reshape(len(movable), len(t), -1)
+        for j, i in enumerate(movable):  # (C', Ky+1, M) ranked one by one
+            key = self._escape_key(clearance[j], commands[i] == self._last_yield)
             if key > best_key:
-                best, best_key, self.last_escape = i, key, driven
+                best, best_key, self.last_escape = i, key, driven[j]
         if best is None:
             self._last_yield = None
             return None
@@ -361,18 +373,31 @@ class CollisionMonitor:
         return self._clearance_at(self.simulate(pose, v, w, t), pts, vel, t)
 
     def _clearance_at(self, poses: np.ndarray, pts: np.ndarray, vel: np.ndarray | None,
-                      t: np.ndarray) -> np.ndarray:
-        """:meth:`_clearance` for given poses (K+1, 3) at step times t (K+1,) [s]."""
+                      t: np.ndarray, reach: float | None = None) -> np.ndarray:
+        """:meth:`_clearance` for given poses (K+1, 3) at step times t (K+1,) [s]. A moving
+        point's clearance shrinks by ``prediction_growth`` t: where it will be is uncertain.
+        For a polygon, points farther than ``reach`` [m] (default circumscribed radius +
+        slowdown_margin) from a pose's centre are not computed (inf)."""
+        moving = None if vel is None or not np.any(vel) else vel.any(axis=1)  # (M,)
+        clearance = self._clearance_of(poses, pts, vel if moving is not None else None, t,
+                                       self._reach_static if reach is None else reach)
+        if moving is not None and self.config.prediction_growth > 0:
+            grow = self.config.prediction_growth * t[:, None]  # (K+1, 1) [m]
+            clearance[:, moving] = np.maximum(clearance[:, moving] - grow, 0.0)
+        return clearance
+
+    def _clearance_of(self, poses: np.ndarray, pts: np.ndarray, vel: np.ndarray | None,
+                      t: np.ndarray, reach: float) -> np.ndarray:
         c, s = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]  # (K+1, 1)
         dx = pts[None, :, 0] - poses[:, 0:1]  # (K+1, M)
         dy = pts[None, :, 1] - poses[:, 1:2]
-        if vel is not None and np.any(vel):  # a moving point is at p + v t at step time t
+        if vel is not None:  # a moving point is at p + v t at step time t
             dx = dx + t[:, None] * vel[None, :, 0]
             dy = dy + t[:, None] * vel[None, :, 1]
         if self.footprint.radius is not None:
             return np.maximum(np.hypot(dx, dy) - self.footprint.radius, 0.0)
         clearance = np.full(dx.shape, np.inf)
-        near = dx * dx + dy * dy <= self._reach_static ** 2  # (K+1, M)
+        near = dx * dx + dy * dy <= reach * reach  # (K+1, M)
         if not near.any():
             return clearance
         cs, sn = np.broadcast_to(c, near.shape)[near], np.broadcast_to(s, near.shape)[near]

@@ -103,6 +103,54 @@ class SeenObstacles:
     stamp: float
 
 
+class StaticClearance:
+    """Is a pose clear of a GridMap? The exact checker's answer, fast far from walls.
+
+    Args:
+        grid: the map (its ``occupied`` cells; beyond its edge counts as occupied).
+    """
+
+    def __init__(self, grid: GridMap) -> None:
+        self.grid = grid
+        self._edt: np.ndarray | None = None  # (H+2, W+2) [m] distance transform, built lazily
+
+    def free(self, poses, footprint) -> np.ndarray:
+        """(N, 3) poses x [m], y [m], yaw [rad] -> (N,) bool: ``footprint`` placed there is
+        clear of the map. A pose whose cell lies farther than the circumscribed radius + 2
+        half cell diagonals from every occupied cell (the map's distance transform) is free
+        whatever its heading; the exact checker judges the rest (near walls), so the answer
+        is the exact checker's, at a lookup's cost in the open."""
+        from ecahd_core.collision import DEFAULT_TOLERANCE, pose_depths
+
+        poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+        res = self.grid.resolution
+        far = self._wall_distance(poses[:, :2]) - math.sqrt(2.0) * res \
+            > footprint.circumscribed_radius  # (N,)
+        out = far.copy()
+        near = ~far
+        if near.any():
+            out[near] = pose_depths(poses[near], footprint, self.grid) <= DEFAULT_TOLERANCE
+        return out
+
+    def _wall_distance(self, xy: np.ndarray) -> np.ndarray:
+        """(N, 2) [m] -> (N,) [m] distance from each point's cell centre to the nearest
+        occupied cell centre of the static map (off the map: 0; beyond the map's edge counts
+        as occupied, as for the exact checker)."""
+        if self._edt is None:
+            import cv2
+
+            free = np.pad(~self.grid.occupied, 1, constant_values=False).astype(np.uint8)
+            self._edt = cv2.distanceTransform(free, cv2.DIST_L2, cv2.DIST_MASK_PRECISE
+                                              ).astype(np.float32) * self.grid.resolution
+        rows, cols = self.grid.world_to_cell(xy)  # may lie off the map
+        rows, cols = np.asarray(rows) + 1, np.asarray(cols) + 1  # the padded frame
+        h, w = self._edt.shape
+        inside = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
+        out = np.zeros(len(xy))
+        out[inside] = self._edt[rows[inside], cols[inside]]
+        return out
+
+
 class LocalWorld:
     """The static map, its cost J and the scans: :meth:`add_scan` updates the rolling window and
     the latest unmapped scan points with their velocities (:attr:`seen`, one object replaced
@@ -126,6 +174,7 @@ class LocalWorld:
         self.offset = tuple(float(v) for v in offset)
         self.min_fuse_interval = min_fuse_interval
         self.tracker = MotionTracker(tracker)
+        self.static_clearance = StaticClearance(grid)
         self.seen: SeenObstacles | None = None  # None until the first scan
         self._fused = (grid, cost.costmap)
         self._dirty = False
@@ -153,12 +202,9 @@ class LocalWorld:
     _window_origin: tuple[float, float] | None = None
 
     def free(self, poses, footprint) -> np.ndarray:
-        """(N, 3) poses x [m], y [m], yaw [rad] -> (N,) bool: ``footprint`` placed there is
-        clear of the static map by the exact checker (the collision monitor's check of its
-        escape commands; the unmapped obstacles are the monitor's own points)."""
-        from ecahd_core.collision import DEFAULT_TOLERANCE, pose_depths
-
-        return pose_depths(poses, footprint, self.grid) <= DEFAULT_TOLERANCE
+        """:meth:`StaticClearance.free` on the static map (the collision monitor's check of
+        its escape commands; the unmapped obstacles are the monitor's own points)."""
+        return self.static_clearance.free(poses, footprint)
 
     @property
     def marked(self) -> bool:

@@ -37,6 +37,15 @@ from ecahd_core.local_costmap import check_real
 
 _OWNER = "motion tracker"
 MAX_POINTS = 2000  # more unmapped points than this per scan are subsampled for tracking
+ALIGN_POINTS = 24  # a cluster is aligned with at most this many of its points (evenly picked)
+CONVERGED = 2e-4  # [m] an ICP step shorter than this ends the iterations
+
+
+def _thin(points: np.ndarray, n: int) -> np.ndarray:
+    """At most n of the points (M, 2), evenly spaced in their order (beam order kept)."""
+    if len(points) <= n:
+        return points
+    return points[np.linspace(0, len(points) - 1, n).astype(np.int64)]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -102,28 +111,35 @@ def align(moved: np.ndarray, before: np.ndarray, shift: np.ndarray, *, trim: flo
     resolved; a lone point is a segment of length 0); shift: (2,) initial guess.
     -> (t, rms [m] of the kept matches' residuals after the last step)."""
     t = np.asarray(shift, dtype=np.float64).copy()
-    a = before  # (B, 2) segment starts
-    b = np.roll(before, -1, axis=0) if len(before) > 1 else before.copy()  # (B, 2) ends
-    lone = np.hypot(*(b - a).T) >= gap
+    ax, ay = before[:, 0], before[:, 1]  # (B,) segment starts
     if len(before) > 1:
+        bx, by = np.roll(ax, -1), np.roll(ay, -1)  # (B,) ends
+        lone = np.hypot(bx - ax, by - ay) >= gap
         lone[-1] = True  # the last point starts no segment (the circle is not closed here)
-    b = np.where(lone[:, None], a, b)
-    ab = b - a  # (B, 2)
-    ab2 = np.maximum(np.sum(ab * ab, axis=1), 1e-18)  # (B,)
+        bx, by = np.where(lone, ax, bx), np.where(lone, ay, by)
+    else:
+        bx, by = ax, ay
+    ex, ey = bx - ax, by - ay  # (B,) segment vectors
+    e2 = np.maximum(ex * ex + ey * ey, 1e-18)
+    mx, my = moved[:, 0:1], moved[:, 1:2]  # (A, 1)
+    rows = np.arange(len(moved))
     keep = max(1, int(math.ceil(trim * len(moved))))
     rms = math.inf
-    for _ in range(iterations + 1):
-        p = moved[:, None, :] - (a[None, :, :] + t)  # (A, B, 2) from each segment start
-        u = np.clip(np.sum(p * ab, axis=-1) / ab2, 0.0, 1.0)  # (A, B)
-        diff = p - u[..., None] * ab  # (A, B, 2) from the nearest point of each segment
-        d2 = np.sum(diff * diff, axis=-1)  # (A, B)
+    for it in range(iterations + 1):
+        px, py = mx - (ax + t[0]), my - (ay + t[1])  # (A, B) from each segment start
+        u = np.clip((px * ex + py * ey) / e2, 0.0, 1.0)
+        dx, dy = px - u * ex, py - u * ey  # (A, B) from the nearest point of each segment
+        d2 = dx * dx + dy * dy
         nearest = np.argmin(d2, axis=1)  # (A,)
-        rows = np.arange(len(moved))
-        best = np.argsort(d2[rows, nearest])[:keep]
-        rms = float(np.sqrt(d2[rows, nearest][best].mean()))
-        if _ == iterations:
+        best_d2 = d2[rows, nearest]
+        best = np.argpartition(best_d2, keep - 1)[:keep] if keep < len(moved) else rows
+        rms = float(np.sqrt(best_d2[best].mean()))
+        if it == iterations:
             break
-        t += diff[rows, nearest][best].mean(axis=0)
+        step = (dx[rows, nearest][best].mean(), dy[rows, nearest][best].mean())
+        t += step
+        if step[0] * step[0] + step[1] * step[1] < CONVERGED * CONVERGED:
+            iterations = it + 1  # one more pass for the residual at the final shift
     return t, rms
 
 
@@ -190,9 +206,9 @@ class MotionTracker:
         reach = cfg.max_speed * dt + cfg.cluster_gap  # [m]
         cluster_v = np.zeros((labels.max(initial=-1) + 1, 2))  # (C, 2)
         for c in range(len(cluster_v)):
-            mine = tracked[labels == c]  # (A, 2)
+            mine = _thin(tracked[labels == c], ALIGN_POINTS)  # (A, 2)
             d2 = np.sum((before[:, None, :] - mine[None, :, :]) ** 2, axis=-1).min(axis=1)
-            cand = before[d2 <= reach * reach]  # (B', 2)
+            cand = _thin(before[d2 <= reach * reach], 2 * ALIGN_POINTS)  # (B', 2)
             if len(cand) == 0:
                 continue
             # from standing still and from the centroids' shift; standing still wins unless the
@@ -200,10 +216,12 @@ class MotionTracker:
             # centroid moves with the view: starting there would invent a velocity)
             still, still_rms = align(mine, cand, np.zeros(2), trim=cfg.trim,
                                      iterations=cfg.iterations, gap=cfg.cluster_gap)
-            moved, moved_rms = align(mine, cand, mine.mean(axis=0) - cand.mean(axis=0),
-                                     trim=cfg.trim, iterations=cfg.iterations,
-                                     gap=cfg.cluster_gap)
-            t = moved if moved_rms < still_rms - cfg.tie_rms else still
+            guess = mine.mean(axis=0) - cand.mean(axis=0)
+            t = still
+            if np.hypot(*(guess - still)) > CONVERGED:  # a second start that can differ
+                moved, moved_rms = align(mine, cand, guess, trim=cfg.trim,
+                                         iterations=cfg.iterations, gap=cfg.cluster_gap)
+                t = moved if moved_rms < still_rms - cfg.tie_rms else still
             v = t / dt
             speed = float(np.hypot(*v))
             if speed < cfg.min_speed:

@@ -167,11 +167,6 @@ def _node_parameters(config: DemoConfig, start) -> dict[str, dict]:
 
 NODE_MODULES = {"sim_bridge": "sim_bridge.node", "global_planner": "ecahd_ros.global_planner",
                 "local_refiner": "ecahd_ros.local_refiner"}
-# niceness of each node's process (the launch file's ``planner_nice``): the global planner's
-# bursts of SD inference (tens to hundreds of ms of CPU) yield the CPU to the controller and the
-# simulator, whose timers must fire on time; as a robot's integrator gives the controller
-# priority. 0 for the others.
-NODE_NICE = {"global_planner": 5}
 
 
 class NodeProcess:
@@ -195,11 +190,9 @@ class NodeProcess:
                "ROS_AUTOMATIC_DISCOVERY_RANGE": os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE",
                                                                "LOCALHOST")}
         self._log = open(self.log_path, "w")  # noqa: SIM115 (closed in stop())
-        nice = NODE_NICE.get(name, 0)
         self.proc = subprocess.Popen(
             [sys.executable, "-m", NODE_MODULES[name], "--ros-args", "--params-file",
-             str(params_file)], stdout=self._log, stderr=subprocess.STDOUT, env=env,
-            preexec_fn=(lambda: os.nice(nice)) if nice else None)
+             str(params_file)], stdout=self._log, stderr=subprocess.STDOUT, env=env)
 
     def check(self) -> None:
         """EcahdError if the process has exited (its log's last line says why)."""

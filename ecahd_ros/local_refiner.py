@@ -138,6 +138,9 @@ PARAMETERS = [
                                      "command that stays clear longest (static map checked)"),
     ParamSpec("monitor_yield_horizon", 3.0, "[s] how far ahead moving obstacles are predicted "
                                             "for yielding"),
+    ParamSpec("monitor_prediction_growth", 0.15, "[m/s] a moving obstacle predicted t s ahead "
+                                                 "counts as this times t closer (its velocity "
+                                                 "is an estimate); 0 trusts the prediction"),
     *shared("seed", "torch_threads"),
 ]
 POSE_HISTORY = 1.0  # [s] of odometry poses kept to place scans by their stamps
@@ -187,6 +190,7 @@ class LocalRefinerParams:
     monitor_source_timeout: float
     monitor_yield: bool
     monitor_yield_horizon: float
+    monitor_prediction_growth: float
     seed: int
     torch_threads: int
 
@@ -196,7 +200,8 @@ class LocalRefinerParams:
                          "torch_threads")
         require_non_negative(self, "c_th", "footprint_padding", "plan_timeout", "seed",
                              "clearance_margin",
-                             "polish_steps", "prepare_ahead", "obstacle_persistence")
+                             "polish_steps", "prepare_ahead", "obstacle_persistence",
+                             "monitor_prediction_growth")
         require_positive(self, "local_costmap_size", "local_costmap_rate",
                          "monitor_time_to_collision", "monitor_source_timeout",
                          "monitor_yield_horizon")
@@ -232,7 +237,8 @@ class LocalRefinerParams:
             # the controller ramps from the command sent: cap, do not scale again each tick
             slowdown_limits=(self.max_v, self.max_w),
             escape_limits=(self.max_v, self.max_w) if self.monitor_yield else None,
-            yield_horizon=self.monitor_yield_horizon)
+            yield_horizon=self.monitor_yield_horizon,
+            prediction_growth=self.monitor_prediction_growth)
 
     @property
     def scan_offset(self) -> tuple[float, float, float]:

@@ -2,7 +2,7 @@
 local_refiner and bag_recorder, the same composition as `ecahd demo`.
 
     ros2 launch ecahd_ros ecahd_sim.launch.py [params_file:=my.yaml] [use_sim_time:=true]
-        [record:=true] [planner_nice:=5]
+        [record:=true]
 
 Send goals with RViz's "2D Goal Pose" tool (goal_pose, frame map).
 """
@@ -22,7 +22,6 @@ def generate_launch_description() -> LaunchDescription:
     params_file = LaunchConfiguration("params_file")
     use_sim_time = LaunchConfiguration("use_sim_time")
     record = LaunchConfiguration("record")
-    planner_nice = LaunchConfiguration("planner_nice")
     default_params = PathJoinSubstitution([FindPackageShare(PACKAGE), "config", "ecahd.yaml"])
     actions = [
         DeclareLaunchArgument("params_file", default_value=default_params,
@@ -31,16 +30,11 @@ def generate_launch_description() -> LaunchDescription:
                               description="planner and refiner follow sim_bridge's /clock"),
         DeclareLaunchArgument("record", default_value="true",
                               description="record the default topics with bag_recorder"),
-        DeclareLaunchArgument("planner_nice", default_value="5",
-                              description="niceness of global_planner: its SD bursts yield the "
-                                          "CPU to local_refiner's control timer"),
         Node(package=PACKAGE, executable="sim_bridge", name="sim_bridge", output="screen",
              parameters=[params_file]),
     ]
     for exe in SIM_TIME_NODES:
-        prefix = ["nice -n ", planner_nice] if exe == "global_planner" else None
         actions.append(Node(package=PACKAGE, executable=exe, name=exe, output="screen",
-                            prefix=prefix,
                             parameters=[params_file, {"use_sim_time": use_sim_time}]))
     actions.append(Node(package=PACKAGE, executable="bag_recorder", name="bag_recorder",
                         output="screen", condition=IfCondition(record),

@@ -192,7 +192,7 @@ def test_monitor_benchmark_small(tmp_path, capsys):
     assert bench.run(args) == 0
     result = json.loads(out.read_text())
     assert (result["window_cells"], result["map_cells"], result["steps"]) == (60, 200, 10)
-    for name in ("filter", "update", "fused"):
+    for name in ("filter", "yield_", "track", "update", "fused"):
         t = result[name]
         assert 0 < t["p50_ms"] <= t["p99_ms"]
         assert t["budget_ratio"] == pytest.approx(t["p99_ms"] / t["budget_ms"])
@@ -213,6 +213,8 @@ def cylinder_arc(cx: float, cy: float, r: float = 0.2, n: int = 9) -> np.ndarray
 
 
 def yielding(**config) -> CollisionMonitor:
+    """Trusting the predictions (prediction_growth 0) unless a test says otherwise."""
+    config = {"prediction_growth": 0.0, **config}
     return CollisionMonitor(CIRCLE, CollisionMonitorConfig(escape_limits=(0.5, 1.5), **config))
 
 
@@ -257,11 +259,17 @@ def test_a_crossing_cylinder_stops_a_robot_whose_path_it_will_cross():
     # 0.6 + 0.02 m from t = 0.72 s: stop
     pts = cylinder_arc(0.8, -0.8)
     vel = np.tile([0.0, 0.5], (len(pts), 1))
-    monitor = CollisionMonitor(CIRCLE)
+    monitor = CollisionMonitor(CIRCLE, CollisionMonitorConfig(prediction_growth=0.0))
     assert monitor.filter(ORIGIN, 0.5, 0.0, pts, 0.0, 0.0).action != "stop"
     predicted = monitor.filter(ORIGIN, 0.5, 0.0, pts, 0.0, 0.0, velocities=vel)
     assert predicted.action == "stop"
     assert predicted.min_time_to_collision == pytest.approx(0.8)  # first 0.1 s step >= 0.72
+    # with the prediction's uncertainty (0.15 m/s: the clearance at t shrinks by 0.15 t) the
+    # gap sqrt(2) (0.8 - 0.5 t) - 0.6 - 0.15 t reaches 0.02 m earlier: at t = 0.511 / 0.857 =
+    # 0.596 s, the step at 0.6 s
+    uncertain = CollisionMonitor(CIRCLE, CollisionMonitorConfig(prediction_growth=0.15))
+    early = uncertain.filter(ORIGIN, 0.5, 0.0, pts, 0.0, 0.0, velocities=vel)
+    assert early.min_time_to_collision == pytest.approx(0.6)
 
 
 def test_velocities_must_match_the_points():

@@ -38,8 +38,7 @@ def test_launch_description(monkeypatch):
     ld = module.generate_launch_description()
     actions = ld.args[0]
     args = {a.args[0]: a.kwargs for a in actions if type(a).__name__ == "DeclareLaunchArgument"}
-    assert set(args) == {"params_file", "use_sim_time", "record", "planner_nice"}
-    assert args["planner_nice"]["default_value"] == "5"
+    assert set(args) == {"params_file", "use_sim_time", "record"}
     nodes = {a.kwargs["executable"]: a.kwargs for a in actions if type(a).__name__ == "Node"}
     assert set(nodes) == {"sim_bridge", "global_planner", "local_refiner", "bag_recorder"}
     assert all(n["package"] == "ecahd_ros" for n in nodes.values())
@@ -52,6 +51,3 @@ def test_launch_description(monkeypatch):
     assert any(isinstance(p, dict) and "use_sim_time" in p
                for p in nodes["global_planner"]["parameters"])
     assert "condition" in nodes["bag_recorder"]
-    # only the planner is niced (its SD bursts yield the CPU to the control timer)
-    assert nodes["global_planner"]["prefix"][0] == "nice -n "
-    assert nodes["local_refiner"]["prefix"] is None

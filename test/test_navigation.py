@@ -314,3 +314,20 @@ def test_waypoints_in_a_wall_snap_to_the_nearest_free_pose():
     assert check_collision(snapped[1:2], robot, grid).collision_free
     deep = np.array([[0.5, 0.75], [3.0, 2.0]])  # inside the block: nothing free within reach
     assert snap_waypoints(grid, robot, deep)[1] == 0
+
+
+@pytest.mark.parametrize("robot", ["circle", "quadruped"])
+def test_static_clearance_agrees_with_the_exact_checker(robot):
+    from ecahd_core.collision import DEFAULT_TOLERANCE, pose_depths
+    from ecahd_core.footprint import make_footprint
+    from ecahd_core.maps import load_map
+    from ecahd_core.sensing import StaticClearance
+
+    grid, fp = load_map("maze2d-large"), make_footprint(robot)
+    rng = np.random.default_rng(0)
+    poses = np.stack([rng.uniform(-0.5, 12.5, 3000), rng.uniform(-0.5, 9.5, 3000),
+                      rng.uniform(-np.pi, np.pi, 3000)], axis=1)  # some off the map
+    exact = pose_depths(poses, fp, grid) <= DEFAULT_TOLERANCE
+    fast = StaticClearance(grid).free(poses, fp)
+    assert np.array_equal(fast, exact)
+    assert 0.05 < exact.mean() < 0.95  # both answers occur

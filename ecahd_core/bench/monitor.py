@@ -5,6 +5,13 @@ each next to its budget and to a plain reference measured in the same run:
 - ``filter``: 360 scan points (a ring 0.9 m around the robot, all within reach), a 10-step
   horizon; budget 2 ms (a 50 Hz command stream). Reference: the same clearance test written as a
   loop over the steps calling :func:`ecahd_core.footprint.point_in_polygon` (inside test only).
+- ``yield``: the filter when a moving obstacle (a cylinder's 20 returns, coming at the robot
+  at 0.4 m/s, among the 360) makes it look for an escape: 14 commands over the 3 s yield
+  horizon, each pose checked on the static map (``StaticClearance``: the distance transform in
+  the open, the exact checker near walls); budget 2 ms.
+- ``track``: :meth:`MotionTracker.update` on 360 returns in 6 moving clusters (the worst case:
+  every return unmapped); budget 10 ms, a tenth of a 10 Hz scan period (it runs on the scan
+  worker, not in the control tick).
 - ``update``: 360 beams on a 200 x 200 window (6 m at 0.03 m); budget 5 ms.
 - ``fused``: the fused cost map over a 2000 x 2000 static map (60 m at 0.03 m, a few walls);
   budget 100 ms (10 Hz scans). Reference: rebuilding the whole cost map with the marks drawn in
@@ -25,6 +32,7 @@ from ecahd_core.errors import EcahdError
 
 FILTER_BUDGET_MS = 2.0  # [ms] one CollisionMonitor.filter call
 UPDATE_BUDGET_MS = 5.0  # [ms] one LocalCostmap.update (360 beams, 200 x 200 window)
+TRACK_BUDGET_MS = 10.0  # [ms] one MotionTracker.update: 10% of a 10 Hz scan period (scan worker)
 FUSED_BUDGET_MS = 100.0  # [ms] update + fused_costmap at 10 Hz scans
 
 
@@ -92,6 +100,8 @@ class Timing:
 @dataclass(frozen=True)
 class MonitorBenchResult:
     filter: Timing
+    yield_: Timing
+    track: Timing
     update: Timing
     fused: Timing
     settings: MonitorBenchSettings
@@ -105,10 +115,19 @@ class MonitorBenchResult:
 
     def to_dict(self) -> dict:
         out = asdict(self)
-        for name in ("filter", "update", "fused"):
+        for name in ("filter", "yield_", "track", "update", "fused"):
             t = getattr(self, name)
             out[name].update(budget_ratio=t.budget_ratio, speedup=t.speedup)
         return out
+
+
+def rng_points(seed: int, n: int):
+    """(n, 2) [m] cluster centres 1-3 m from the origin, seeded."""
+    import numpy as np
+
+    rng = np.random.default_rng(seed)
+    a, r = rng.uniform(0, 2 * math.pi, n), rng.uniform(1.0, 3.0, n)
+    return np.stack([r * np.cos(a), r * np.sin(a)], axis=1)
 
 
 def _percentiles_ms(fn, repeats: int, warmup: int) -> tuple[float, float]:
@@ -162,7 +181,6 @@ def run_monitor_benchmark(settings: MonitorBenchSettings = MonitorBenchSettings(
         ref, _ = _percentiles_ms(filter_reference, s.repeats, s.warmup)
         filter_t = Timing(p50, p99, s.repeats, FILTER_BUDGET_MS, ref)
 
-        # ---------------------------------------------------------- update + fused map
         n = s.map_cells
         data = np.zeros((n, n), dtype=np.int8)
         for k in range(1, 8):  # a few walls across the map
@@ -170,6 +188,42 @@ def run_monitor_benchmark(settings: MonitorBenchSettings = MonitorBenchSettings(
             data[n // 2:, k * n // 8] = OCCUPIED  # columns in the upper half
         grid = GridMap(data=data, resolution=s.resolution, name=f"bench {n}x{n}")
         centre = 0.5 * n * s.resolution + 0.3 * s.resolution  # [m] off the walls
+
+        # ------------------------------------------------------------ yield and tracker
+        from ecahd_core.collision_monitor import CollisionMonitorConfig
+        from ecahd_core.sensing import StaticClearance
+        from ecahd_core.tracking import MotionTracker
+
+        yielding = CollisionMonitor(footprint, CollisionMonitorConfig(escape_limits=(0.5, 1.5)))
+        here = (centre + 1.0, centre - 1.0, 0.0)  # clear of the walls (rows left, columns up)
+        arc = math.pi + np.linspace(-1.2, 1.2, 20)  # the near side of a 0.2 m cylinder
+        cyl = np.stack([here[0] + 1.3 + 0.2 * np.cos(arc), here[1] + 0.2 * np.sin(arc)], 1)
+        ring_here = ring[20:] + here[:2]  # (M - 20, 2) static returns
+        pts = np.concatenate([cyl, ring_here])  # (M, 2)
+        vel = np.zeros_like(pts)
+        vel[:len(cyl)] = (-0.4, 0.0)  # coming at the robot
+        clear = StaticClearance(grid)  # what local_refiner's LocalWorld.free uses
+        free = lambda q: clear.free(q, footprint)  # noqa: E731
+        probe = yielding.filter(here, 0.5, 0.0, pts, 0.0, 0.0, velocities=vel, free=free)
+        if probe.action != "yield":
+            raise EcahdError(f"bench monitor: the yield case did not yield ({probe.reason})")
+        y50, y99 = _percentiles_ms(
+            lambda: yielding.filter(here, 0.5, 0.0, pts, 0.0, 0.0, velocities=vel, free=free),
+            max(1, s.repeats // 5), 1)
+        yield_t = Timing(y50, y99, max(1, s.repeats // 5), FILTER_BUDGET_MS, None)
+        tracker = MotionTracker()
+        blobs = np.concatenate([c + 0.15 * np.stack([np.cos(a), np.sin(a)], 1) for c, a in zip(
+            rng_points(s.seed, 6), np.array_split(np.linspace(0, 2 * math.pi, s.points), 6))])
+        tick = iter(range(10 ** 9))
+
+        def track():  # the clusters move +x at 0.4 m/s, scans 0.1 s apart
+            k = next(tick)
+            tracker.update(blobs + (0.04 * (k % 25), 0.0), 0.1 * k)
+
+        t50, t99 = _percentiles_ms(track, s.repeats, s.warmup)
+        track_t = Timing(t50, t99, s.repeats, TRACK_BUDGET_MS, None)
+
+        # ---------------------------------------------------------- update + fused map
         lc = LocalCostmap.for_map(grid, LocalCostmapConfig(size=s.window))
         cfg = CostConfig()
         rng = np.random.default_rng(s.seed)
@@ -202,7 +256,8 @@ def run_monitor_benchmark(settings: MonitorBenchSettings = MonitorBenchSettings(
         threads = torch.get_num_threads()
     finally:
         torch.set_num_threads(previous_threads)
-    return MonitorBenchResult(filter=filter_t, update=update_t, fused=fused_t, settings=s,
+    return MonitorBenchResult(filter=filter_t, yield_=yield_t, track=track_t, update=update_t,
+                              fused=fused_t, settings=s,
                               steps=monitor.config.steps, window_cells=lc.cells, map_cells=n,
                               footprint_vertices=len(footprint.polygon),
                               torch=torch.__version__, python=platform.python_version(),
@@ -220,7 +275,8 @@ def format_table(result: MonitorBenchResult) -> str:
         f"{'measured':<22}{'p50 [ms]':>10}{'p99 [ms]':>10}{'budget':>9}{'p99/budget':>12}"
         f"{'reference [ms]':>16}{'ref/p50':>9}",
     ]
-    rows = (("CollisionMonitor.filter", r.filter), ("LocalCostmap.update", r.update),
+    rows = (("CollisionMonitor.filter", r.filter), ("filter, yielding", r.yield_),
+            ("MotionTracker.update", r.track), ("LocalCostmap.update", r.update),
             ("update + fused_costmap", r.fused))
     for name, t in rows:
         ref = "-" if t.reference_ms is None else f"{t.reference_ms:.2f}"
