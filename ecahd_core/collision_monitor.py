@@ -19,14 +19,21 @@ Every command (v, w) is checked before it reaches the base:
    again (step 3; stop if it fails).
 5. Else the command passes unchanged ("none").
 
+The static map (beyond Nav2): given the map's overlap depths (``depths``), every command that
+passes is also simulated over ``static_horizon`` and refused when it would bring the footprint
+into the map (or deeper into it than now): the robot turns on the spot instead if that is
+clear, else stops. The planners keep a clearance margin from walls, but a tracker's arc cuts
+corners; the scan points the monitor sees are only the unmapped ones.
+
 Moving obstacles (beyond Nav2). Given each point's velocity (:mod:`ecahd_core.tracking`), a
 point is predicted at p + v t at step time t, its clearance shrunk by ``prediction_growth`` t
-(the estimate's uncertainty), so the monitor judges where a crossing person or cart *will* be. A robot that stops in its way is hit all the same, so when the command must
+(the estimate's uncertainty, up to t = time_to_collision), so the monitor judges where a
+crossing person or cart *will* be. A robot that stops in its way is hit all the same, so when the command must
 stop and the stopped robot itself would be touched by a moving point within ``yield_horizon``
 seconds, the monitor **yields**: it tries a small set of commands (v in {-1, -1/2, 0, 1/2, 1}
 x max_v, w in {-1/2, 0, 1/2} x max_w of ``escape_limits``), drops every one whose simulated
-pose the caller's ``free`` check refuses (the static map: the scan points here are only
-the unmapped ones) is cut there (the robot would wait before it), and sends the one touched
+pose the caller's ``depths`` put into the static map (the scan points here are only the
+unmapped ones) is cut there (the robot would wait before it), and sends the one touched
 in the fewest steps, then latest, then the last yield's command again (no dithering), then
 farthest from what comes at the horizon's end: often backing off out of the crossing,
 sometimes clearing it ahead. Standing still wins ties. Only static points slow the robot
@@ -82,8 +89,10 @@ class CollisionMonitorConfig:
         yield_horizon: [s] how far ahead a moving point is predicted when judging whether the
             stopped robot would be hit, and the escape commands.
         prediction_growth: [m/s] a moving point predicted t seconds ahead counts as this
-            times t closer (its velocity is an estimate: measured errors up to 0.1 m/s, and a
-            person may turn); 0 trusts the prediction.
+            times min(t, time_to_collision) closer (its velocity is an estimate: errors up to
+            0.1 m/s measured, and a person may turn); 0 trusts the prediction.
+        static_horizon: [s] how far ahead every command is checked against the static map
+            (when the caller gives the map's depths): the tracker's arcs cut corners.
     """
 
     time_to_collision: float = 1.0
@@ -97,6 +106,7 @@ class CollisionMonitorConfig:
     escape_limits: tuple[float, float] | None = None
     yield_horizon: float = 3.0
     prediction_growth: float = 0.15
+    static_horizon: float = 0.5
 
     def __post_init__(self) -> None:
         for field in ("slowdown_limits", "escape_limits"):
@@ -107,7 +117,8 @@ class CollisionMonitorConfig:
                 raise EcahdError(f"{field} must be (max_v, max_w) or None, got {limits!r}")
             for name, value in zip(("max_v", "max_w"), limits):
                 check_real(_OWNER, f"{field} {name}", value, zero_ok=False)
-        for name in ("time_to_collision", "sim_dt", "slowdown_ratio", "yield_horizon"):
+        for name in ("time_to_collision", "sim_dt", "slowdown_ratio", "yield_horizon",
+                     "static_horizon"):
             check_real(_OWNER, name, getattr(self, name), zero_ok=False)
         for name in ("slowdown_margin", "stop_margin", "source_timeout", "prediction_growth"):
             check_real(_OWNER, name, getattr(self, name), zero_ok=True)
@@ -173,12 +184,14 @@ class CollisionMonitor:
         self._reach_static = footprint.circumscribed_radius + cfg.slowdown_margin
         self._t = np.arange(cfg.steps + 1) * cfg.sim_dt  # (K+1,) [s]
         self._t_yield = np.arange(cfg.yield_steps + 1) * cfg.sim_dt  # (Ky+1,) [s]
+        self._t_static = np.arange(max(1, math.ceil(cfg.static_horizon / cfg.sim_dt - 1e-9))
+                                   + 1) * cfg.sim_dt  # (Ks+1,) [s]
         self.last_escape: np.ndarray | None = None  # (Ky+1, 3) the last yield's poses
         self._last_yield: tuple[float, float] | None = None  # its command (v, w)
 
     # ------------------------------------------------------------------------------ filter
     def filter(self, pose, v: float, w: float, points, points_stamp: float | None,
-               now: float, *, velocities=None, free=None) -> MonitorResult:
+               now: float, *, velocities=None, depths=None) -> MonitorResult:
         """Filter one velocity command.
 
         Args:
@@ -191,12 +204,39 @@ class CollisionMonitor:
             now: [s] the current time.
             velocities: (M, 2) [m/s] each point's velocity (:class:`MotionTracker`); None:
                 every point is static.
-            free: callable (N, 3) poses -> (N,) bool, True where the footprint is clear of
-                the static map; needed to yield (the escape commands are checked with it).
+            depths: callable (N, 3) poses -> (N,) overlap depth [m] of the footprint with the
+                static map (<= 0: clear; e.g. :meth:`StaticClearance.depths` with the footprint
+                grown by the clearance margin). Given, every command is also checked against
+                the map over ``static_horizon`` (the scan points here are only the unmapped
+                ones) and the robot may yield; None: neither.
 
         Returns:
             MonitorResult with the command to send.
         """
+        result = self._filter_points(pose, v, w, points, points_stamp, now, velocities, depths)
+        if depths is None or result.action in ("stop", "yield") or \
+                self._static_ok(pose, result.v, result.w, depths):
+            return result
+        # the command would bring the footprint into (or deeper into) the map: turn on the
+        # spot if that is clear (the tracker's arc straightens as the heading error shrinks)
+        turn = 0.0 if result.w == 0.0 or not self._static_ok(pose, 0.0, result.w, depths) \
+            else result.w
+        return MonitorResult(0.0, turn, "stop", result.min_time_to_collision,
+                             f"v={result.v:.2f} m/s, w={result.w:.2f} rad/s would touch the "
+                             f"static map within {self.config.static_horizon} s"
+                             + (": turning on the spot" if turn else ""))
+
+    def _static_ok(self, pose, v: float, w: float, depths) -> bool:
+        """The motion at (v, w) over static_horizon never goes deeper into the static map
+        than the robot is now, nor into it when it is clear now."""
+        from ecahd_core.collision import DEFAULT_TOLERANCE
+
+        d = np.asarray(depths(self.simulate(pose, v, w, self._t_static)), dtype=np.float64)
+        return bool(np.all(d[1:] <= max(float(d[0]), DEFAULT_TOLERANCE)))
+
+    def _filter_points(self, pose, v: float, w: float, points, points_stamp, now: float,
+                       velocities, depths) -> MonitorResult:
+        """The stop / slowdown / yield rules against the scan points (module docstring)."""
         cfg = self.config
         pose = np.asarray(pose, dtype=np.float64).reshape(-1)
         if pose.shape != (3,) or not np.all(np.isfinite(pose)):
@@ -235,14 +275,14 @@ class CollisionMonitor:
             reason = (f"{self._count(clearance[stop_step], cfg.stop_margin)} point(s) within "
                       f"{cfg.stop_margin} m of the footprint in {ttc:.2f} s")
             if moving:
-                escape = self._yield(pose, pts, vel, free)
+                escape = self._yield(pose, pts, vel, depths)
                 if escape is not None:
                     return MonitorResult(escape[0], escape[1], "yield", ttc,
                                          f"{reason}; a moving obstacle would hit the stopped "
                                          f"robot: {escape[2]}")
             return MonitorResult(0.0, 0.0, "stop", ttc, reason)
         if moving and v == 0.0 and w == 0.0:  # a stopped robot: is something coming at it?
-            escape = self._yield(pose, pts, vel, free)
+            escape = self._yield(pose, pts, vel, depths)
             if escape is not None:
                 return MonitorResult(escape[0], escape[1], "yield", math.inf,
                                      f"a moving obstacle would hit the stopped robot: "
@@ -271,7 +311,7 @@ class CollisionMonitor:
             reason = (f"the slowed command still comes within {cfg.stop_margin} m in "
                       f"{float(self._t[restop]):.2f} s")
             if moving:
-                escape = self._yield(pose, pts, vel, free)
+                escape = self._yield(pose, pts, vel, depths)
                 if escape is not None:
                     return MonitorResult(escape[0], escape[1], "yield", math.inf,
                                          f"{reason}; a moving obstacle would hit the stopped "
@@ -284,19 +324,19 @@ class CollisionMonitor:
                              + ("" if cfg.slowdown_limits is None else " of the limits"))
 
     # ------------------------------------------------------------------------------- yield
-    def _yield(self, pose: np.ndarray, pts: np.ndarray, vel: np.ndarray, free
+    def _yield(self, pose: np.ndarray, pts: np.ndarray, vel: np.ndarray, depths
                ) -> tuple[float, float, str] | None:
         """An escape command (v, w, why) when the stopped robot would be hit by a moving point
         within yield_horizon and a command does better; None: stopping is as good.
         pts, vel: (M, 2) points [m] and velocities [m/s].
 
-        Each escape command drives until just before its first pose that ``free`` refuses and
-        waits there (the monitor re-judges every tick, so it never drives into the map); one
+        Each escape command drives until just before its first pose that goes into the static
+        map (``depths``; deeper than now when the robot already touches it) and waits there (the monitor re-judges every tick, so it never drives into the map); one
         that cannot move a single step is dropped. Commands are ranked by, in order: fewer
         steps within stop_margin of a point, the first such step later, more clearance at
         the horizon's end (away from what comes); it must beat standing still."""
         cfg = self.config
-        if cfg.escape_limits is None or free is None:
+        if cfg.escape_limits is None or depths is None:
             return None
         t = self._t_yield  # (Ky+1,)
         # only touching matters here (and the clearance left at the end, a tie-breaker): a
@@ -311,7 +351,11 @@ class CollisionMonitor:
         commands = [(fv * max_v, fw * max_w) for fv in _ESCAPE_V for fw in _ESCAPE_W
                     if (fv, fw) != (0.0, 0.0)]
         poses = np.stack([self.simulate(pose, cv, cw, t) for cv, cw in commands])  # (C, Ky+1, 3)
-        clear = np.asarray(free(poses.reshape(-1, 3)), dtype=bool).reshape(len(commands), -1)
+        from ecahd_core.collision import DEFAULT_TOLERANCE
+
+        d = np.asarray(depths(np.concatenate([pose[None], poses.reshape(-1, 3)])),
+                       dtype=np.float64)
+        clear = (d[1:] <= max(float(d[0]), DEFAULT_TOLERANCE)).reshape(len(commands), -1)
         best, best_key = None, self._escape_key(standing, False)
         # each command drives until its first refused step and waits there
         blocked = ~clear  # (C, Ky+1)
@@ -382,7 +426,10 @@ class CollisionMonitor:
         clearance = self._clearance_of(poses, pts, vel if moving is not None else None, t,
                                        self._reach_static if reach is None else reach)
         if moving is not None and self.config.prediction_growth > 0:
-            grow = self.config.prediction_growth * t[:, None]  # (K+1, 1) [m]
+            # (K+1, 1) [m]; capped at the stop horizon: beyond it the estimate only decides
+            # whether to yield, and a growing margin there made the robot yield for minutes
+            grow = self.config.prediction_growth * np.minimum(t, self.config.time_to_collision
+                                                              )[:, None]
             clearance[:, moving] = np.maximum(clearance[:, moving] - grow, 0.0)
         return clearance
 

@@ -116,20 +116,26 @@ class StaticClearance:
 
     def free(self, poses, footprint) -> np.ndarray:
         """(N, 3) poses x [m], y [m], yaw [rad] -> (N,) bool: ``footprint`` placed there is
-        clear of the map. A pose whose cell lies farther than the circumscribed radius + 2
-        half cell diagonals from every occupied cell (the map's distance transform) is free
-        whatever its heading; the exact checker judges the rest (near walls), so the answer
-        is the exact checker's, at a lookup's cost in the open."""
-        from ecahd_core.collision import DEFAULT_TOLERANCE, pose_depths
+        clear of the map (:meth:`depths` <= the exact checker's tolerance)."""
+        from ecahd_core.collision import DEFAULT_TOLERANCE
+
+        return self.depths(poses, footprint) <= DEFAULT_TOLERANCE
+
+    def depths(self, poses, footprint) -> np.ndarray:
+        """(N, 3) poses -> (N,) the exact checker's overlap depth [m] of ``footprint`` with the
+        map (<= 0 or -inf: free). A pose whose cell lies farther than the circumscribed radius
+        + 2 half cell diagonals from every occupied cell (the map's distance transform) is
+        free whatever its heading (-inf, a lookup's cost); the exact checker judges the rest
+        (near walls)."""
+        from ecahd_core.collision import pose_depths
 
         poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
         res = self.grid.resolution
-        far = self._wall_distance(poses[:, :2]) - math.sqrt(2.0) * res \
-            > footprint.circumscribed_radius  # (N,)
-        out = far.copy()
-        near = ~far
+        near = self._wall_distance(poses[:, :2]) - math.sqrt(2.0) * res \
+            <= footprint.circumscribed_radius  # (N,)
+        out = np.full(len(poses), -np.inf)
         if near.any():
-            out[near] = pose_depths(poses[near], footprint, self.grid) <= DEFAULT_TOLERANCE
+            out[near] = pose_depths(poses[near], footprint, self.grid)
         return out
 
     def _wall_distance(self, xy: np.ndarray) -> np.ndarray:
@@ -201,10 +207,11 @@ class LocalWorld:
 
     _window_origin: tuple[float, float] | None = None
 
-    def free(self, poses, footprint) -> np.ndarray:
-        """:meth:`StaticClearance.free` on the static map (the collision monitor's check of
-        its escape commands; the unmapped obstacles are the monitor's own points)."""
-        return self.static_clearance.free(poses, footprint)
+    def depths(self, poses, footprint) -> np.ndarray:
+        """:meth:`StaticClearance.depths` on the static map: the collision monitor's check of
+        every command and of its escapes against what the map knows (the unmapped obstacles
+        are the monitor's own points)."""
+        return self.static_clearance.depths(poses, footprint)
 
     @property
     def marked(self) -> bool:

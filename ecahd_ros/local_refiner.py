@@ -278,6 +278,7 @@ class LocalRefiner(Node):
         self.params: LocalRefinerParams = read_parameters(self, PARAMETERS, LocalRefinerParams)
         p = self.params
         self.footprint = make_robot(p)
+        self.judged = make_robot(p, margin=p.clearance_margin)  # what plans and commands clear
         if p.dd_enabled:  # an unreadable or mismatched model fails now, not at the first map
             from ecahd_core.model_zoo import check_model
 
@@ -405,7 +406,7 @@ class LocalRefiner(Node):
             cost_config=cost.config,
             dense=DenseConfig(points=self.points, c_th=p.c_th, enabled=p.dd_enabled,
                               polish_steps=p.polish_steps))
-        refiner = SegmentRefiner(planner, grid, make_robot(p, margin=p.clearance_margin),
+        refiner = SegmentRefiner(planner, grid, self.judged,
                                  generator=self.generator, exact=p.exact_check)
         world = None
         if p.use_scan:
@@ -521,7 +522,7 @@ class LocalRefiner(Node):
             # the last line of defence, once scans flow
             guarded = self.monitor.filter(pose, v, w, seen.points, seen.stamp, now,
                                           velocities=seen.velocities,
-                                          free=partial(world.free, footprint=self.footprint))
+                                          depths=partial(world.depths, footprint=self.judged))
             v, w, action = guarded.v, guarded.w, guarded.action
             if action != "none":
                 self.counters[f"monitor_{action}"] += 1

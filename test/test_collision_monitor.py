@@ -192,7 +192,7 @@ def test_monitor_benchmark_small(tmp_path, capsys):
     assert bench.run(args) == 0
     result = json.loads(out.read_text())
     assert (result["window_cells"], result["map_cells"], result["steps"]) == (60, 200, 10)
-    for name in ("filter", "yield_", "track", "update", "fused"):
+    for name in ("filter", "static", "yield_", "track", "update", "fused"):
         t = result[name]
         assert 0 < t["p50_ms"] <= t["p99_ms"]
         assert t["budget_ratio"] == pytest.approx(t["p99_ms"] / t["budget_ms"])
@@ -212,6 +212,11 @@ def cylinder_arc(cx: float, cy: float, r: float = 0.2, n: int = 9) -> np.ndarray
     return np.stack([cx + r * np.cos(a), cy + r * np.sin(a)], axis=1)
 
 
+def open_floor(poses: np.ndarray) -> np.ndarray:
+    """Static-map depths (N,) of poses (N, 3): nothing anywhere."""
+    return np.full(len(poses), -np.inf)
+
+
 def yielding(**config) -> CollisionMonitor:
     """Trusting the predictions (prediction_growth 0) unless a test says otherwise."""
     config = {"prediction_growth": 0.0, **config}
@@ -223,32 +228,30 @@ def test_a_cylinder_coming_at_a_stopped_robot_makes_it_back_off_where_the_map_al
     # robot (r 0.4) is touched when the gap 1.0 - 0.6 - 0.4 t reaches 0.02 m, at t ~ 0.95 s
     pts = cylinder_arc(0.0, 1.0)
     vel = np.tile([0.0, -0.4], (len(pts), 1))
-    free_everywhere = lambda poses: np.ones(len(poses), dtype=bool)  # noqa: E731
     result = yielding().filter(ORIGIN, 0.0, 0.0, pts, 0.0, 0.0, velocities=vel,
-                               free=free_everywhere)
+                               depths=open_floor)
     assert result.action == "yield" and abs(result.v) > 0
     assert "standing: from 1.00 s" in result.reason  # first 0.1 s step with gap <= 0.02 m
-    # a wall behind (x < 0 refused by the static map): the escape goes forward
-    no_reverse = lambda poses: poses[:, 0] >= -1e-9  # noqa: E731
+    # a wall behind (x < 0 is in the static map, as deep as it is negative): forward
+    no_reverse = lambda poses: np.where(poses[:, 0] >= 0, -np.inf, -poses[:, 0])  # noqa: E731
     forward = yielding().filter(ORIGIN, 0.0, 0.0, pts, 0.0, 0.0, velocities=vel,
-                                free=no_reverse)
+                                depths=no_reverse)
     assert forward.action == "yield" and forward.v > 0
     # boxed in (every move refused): stop, as without yielding
-    boxed = lambda poses: np.hypot(poses[:, 0], poses[:, 1]) < 1e-9  # noqa: E731
-    stuck = yielding().filter(ORIGIN, 0.0, 0.0, pts, 0.0, 0.0, velocities=vel, free=boxed)
+    boxed = lambda poses: np.hypot(poses[:, 0], poses[:, 1])  # noqa: E731
+    stuck = yielding().filter(ORIGIN, 0.0, 0.0, pts, 0.0, 0.0, velocities=vel, depths=boxed)
     assert (stuck.v, stuck.w) == (0.0, 0.0)
 
 
 def test_no_yield_without_limits_or_map_check_or_for_static_points():
     pts = cylinder_arc(0.0, 1.0)
     vel = np.tile([0.0, -0.4], (len(pts), 1))
-    free = lambda poses: np.ones(len(poses), dtype=bool)  # noqa: E731
     plain = CollisionMonitor(CIRCLE)  # escape_limits None: Nav2's stop
     assert plain.filter(ORIGIN, 0.0, 0.0, pts, 0.0, 0.0, velocities=vel,
-                        free=free).action != "yield"
+                        depths=open_floor).action != "yield"
     assert yielding().filter(ORIGIN, 0.0, 0.0, pts, 0.0, 0.0, velocities=vel).action != "yield"
     # the same points standing still: nothing comes at the robot
-    still = yielding().filter(ORIGIN, 0.0, 0.0, pts, 0.0, 0.0, free=free)
+    still = yielding().filter(ORIGIN, 0.0, 0.0, pts, 0.0, 0.0, depths=open_floor)
     assert still.action == "none"
 
 
@@ -287,3 +290,24 @@ def test_a_cylinder_keeping_pace_beside_the_robot_does_not_slow_it_down():
     assert monitor.filter(ORIGIN, 0.5, 0.0, pts, 0.0, 0.0).action == "slowdown"
     vel = np.tile([0.5, 0.0], (len(pts), 1))
     assert monitor.filter(ORIGIN, 0.5, 0.0, pts, 0.0, 0.0, velocities=vel).action == "none"
+
+
+def test_a_command_into_the_static_map_turns_the_robot_on_the_spot_instead():
+    # a wall across the path at x = 0.5 (depth: how far the circle's front, x + 0.4, passes
+    # it). At 0.5 m/s with w = 0.3 the front reaches the wall within 0.5 s (0.25 m covered,
+    # 0.1 m of space): refused; turning on the spot keeps x and passes; no scan points at all
+    wall = lambda poses: np.where(poses[:, 0] + 0.4 > 0.5, poses[:, 0] - 0.1, -np.inf)  # noqa
+    monitor = CollisionMonitor(CIRCLE)
+    result = monitor.filter(ORIGIN, 0.5, 0.3, np.zeros((0, 2)), 0.0, 0.0, depths=wall)
+    assert (result.v, result.w, result.action) == (0.0, 0.3, "stop")
+    assert "static map" in result.reason
+    # slower, it stays clear within the horizon (0.1 m/s: 0.05 m in 0.5 s): passes
+    slow = monitor.filter(ORIGIN, 0.1, 0.3, np.zeros((0, 2)), 0.0, 0.0, depths=wall)
+    assert (slow.v, slow.w, slow.action) == (0.1, 0.3, "none")
+    # already 0.05 m into the map (a pose within the clearance margin): backing out passes,
+    # going deeper does not
+    inside = (0.15, 0.0, 0.0)
+    assert monitor.filter(inside, -0.2, 0.0, np.zeros((0, 2)), 0.0, 0.0,
+                          depths=wall).action == "none"
+    deeper = monitor.filter(inside, 0.2, 0.0, np.zeros((0, 2)), 0.0, 0.0, depths=wall)
+    assert (deeper.v, deeper.w) == (0.0, 0.0)

@@ -276,8 +276,8 @@ def test_a_scanned_blockage_sends_the_detour_through_the_other_corridor():
     assert seen.stamp == 0.0 and seen.velocities.shape == seen.points.shape
     assert len(seen.points) > 80 and np.allclose(seen.points[:, 0], 3.0, atol=1e-6)
     assert not seen.velocities.any()
-    assert world.free(np.array([[2.0, 0.75, 0.0], [2.0, 1.2, 0.0]]), robot).tolist() == \
-        [True, False]  # the second overlaps the wall block above (y >= 1.5)
+    depths = world.depths(np.array([[2.0, 0.75, 0.0], [2.0, 1.2, 0.0]]), robot)
+    assert depths[0] <= 0 < depths[1]  # the second overlaps the wall block above (y >= 1.5)
     # column x in [3.0, 3.1] blocked from y = 0 up to the wall block; the row next to the block
     # (y in [1.4, 1.5]) counts as the block's own (marks within one cell of a known obstacle)
     assert fused.occupied[:14, 30].all() and not grid.occupied[:14, 30].any()

@@ -5,6 +5,8 @@ each next to its budget and to a plain reference measured in the same run:
 - ``filter``: 360 scan points (a ring 0.9 m around the robot, all within reach), a 10-step
   horizon; budget 2 ms (a 50 Hz command stream). Reference: the same clearance test written as a
   loop over the steps calling :func:`ecahd_core.footprint.point_in_polygon` (inside test only).
+- ``static``: the filter as local_refiner calls it, with the static map's depths
+  (``StaticClearance``) checking the command over ``static_horizon``; budget 2 ms.
 - ``yield``: the filter when a moving obstacle (a cylinder's 20 returns, coming at the robot
   at 0.4 m/s, among the 360) makes it look for an escape: 14 commands over the 3 s yield
   horizon, each pose checked on the static map (``StaticClearance``: the distance transform in
@@ -100,6 +102,7 @@ class Timing:
 @dataclass(frozen=True)
 class MonitorBenchResult:
     filter: Timing
+    static: Timing
     yield_: Timing
     track: Timing
     update: Timing
@@ -115,7 +118,7 @@ class MonitorBenchResult:
 
     def to_dict(self) -> dict:
         out = asdict(self)
-        for name in ("filter", "yield_", "track", "update", "fused"):
+        for name in ("filter", "static", "yield_", "track", "update", "fused"):
             t = getattr(self, name)
             out[name].update(budget_ratio=t.budget_ratio, speedup=t.speedup)
         return out
@@ -203,12 +206,16 @@ def run_monitor_benchmark(settings: MonitorBenchSettings = MonitorBenchSettings(
         vel = np.zeros_like(pts)
         vel[:len(cyl)] = (-0.4, 0.0)  # coming at the robot
         clear = StaticClearance(grid)  # what local_refiner's LocalWorld.free uses
-        free = lambda q: clear.free(q, footprint)  # noqa: E731
-        probe = yielding.filter(here, 0.5, 0.0, pts, 0.0, 0.0, velocities=vel, free=free)
+        depths = lambda q: clear.depths(q, footprint)  # noqa: E731
+        probe = yielding.filter(here, 0.5, 0.0, pts, 0.0, 0.0, velocities=vel, depths=depths)
         if probe.action != "yield":
             raise EcahdError(f"bench monitor: the yield case did not yield ({probe.reason})")
+        s50, s99 = _percentiles_ms(
+            lambda: yielding.filter(here, 0.5, 0.3, ring_here, 0.0, 0.0, depths=depths),
+            s.repeats, s.warmup)
+        static_t = Timing(s50, s99, s.repeats, FILTER_BUDGET_MS, None)
         y50, y99 = _percentiles_ms(
-            lambda: yielding.filter(here, 0.5, 0.0, pts, 0.0, 0.0, velocities=vel, free=free),
+            lambda: yielding.filter(here, 0.5, 0.0, pts, 0.0, 0.0, velocities=vel, depths=depths),
             max(1, s.repeats // 5), 1)
         yield_t = Timing(y50, y99, max(1, s.repeats // 5), FILTER_BUDGET_MS, None)
         tracker = MotionTracker()
@@ -256,8 +263,8 @@ def run_monitor_benchmark(settings: MonitorBenchSettings = MonitorBenchSettings(
         threads = torch.get_num_threads()
     finally:
         torch.set_num_threads(previous_threads)
-    return MonitorBenchResult(filter=filter_t, yield_=yield_t, track=track_t, update=update_t,
-                              fused=fused_t, settings=s,
+    return MonitorBenchResult(filter=filter_t, static=static_t, yield_=yield_t, track=track_t,
+                              update=update_t, fused=fused_t, settings=s,
                               steps=monitor.config.steps, window_cells=lc.cells, map_cells=n,
                               footprint_vertices=len(footprint.polygon),
                               torch=torch.__version__, python=platform.python_version(),
@@ -275,7 +282,8 @@ def format_table(result: MonitorBenchResult) -> str:
         f"{'measured':<22}{'p50 [ms]':>10}{'p99 [ms]':>10}{'budget':>9}{'p99/budget':>12}"
         f"{'reference [ms]':>16}{'ref/p50':>9}",
     ]
-    rows = (("CollisionMonitor.filter", r.filter), ("filter, yielding", r.yield_),
+    rows = (("CollisionMonitor.filter", r.filter), ("filter + static map", r.static),
+            ("filter, yielding", r.yield_),
             ("MotionTracker.update", r.track), ("LocalCostmap.update", r.update),
             ("update + fused_costmap", r.fused))
     for name, t in rows:
