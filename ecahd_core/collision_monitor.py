@@ -28,16 +28,16 @@ corners; the scan points the monitor sees are only the unmapped ones.
 Moving obstacles (beyond Nav2). Given each point's velocity (:mod:`ecahd_core.tracking`), a
 point is predicted at p + v t at step time t, its clearance shrunk by ``prediction_growth`` t
 (the estimate's uncertainty, up to t = time_to_collision), so the monitor judges where a
-crossing person or cart *will* be. A robot that stops in its way is hit all the same, so when the command must
-stop and the stopped robot itself would be touched by a moving point within ``yield_horizon``
-seconds, the monitor **yields**: it tries a small set of commands (v in {-1, -1/2, 0, 1/2, 1}
-x max_v, w in {-1/2, 0, 1/2} x max_w of ``escape_limits``), drops every one whose simulated
-pose the caller's ``depths`` put into the static map (the scan points here are only the
-unmapped ones) is cut there (the robot would wait before it), and sends the one touched
-in the fewest steps, then latest, then the last yield's command again (no dithering), then
-farthest from what comes at the horizon's end: often backing off out of the crossing,
-sometimes clearing it ahead. Standing still wins ties. Only static points slow the robot
-down: slowing near a moving one does not help (it may come from behind).
+crossing person or cart *will* be. A robot that stops in its way is hit all the same, so when
+the command must stop and the stopped robot itself would be touched by a moving point within
+``yield_horizon`` seconds, the monitor **yields**: it tries a small set of commands (v in {-1,
+-1/2, 0, 1/2, 1} x max_v, w in {-1/2, 0, 1/2} x max_w of ``escape_limits``), each cut before
+its first simulated pose that the caller's ``depths`` put into the static map (the robot would
+wait there; the scan points here are only the unmapped ones), and sends the one
+touched in the fewest steps, then latest, then the last yield's command again (no dithering),
+then farthest from what comes at the horizon's end: often backing off out of the crossing,
+sometimes clearing it ahead. Standing still wins ties. Only static points slow the robot down:
+slowing near a moving one does not help (it may come from behind).
 
 The step k of the first stop hit gives ``min_time_to_collision`` = k sim_dt [s] (``inf`` when
 nothing is hit within the horizon). A point is never skipped between two steps as long as
@@ -330,11 +330,12 @@ class CollisionMonitor:
         within yield_horizon and a command does better; None: stopping is as good.
         pts, vel: (M, 2) points [m] and velocities [m/s].
 
-        Each escape command drives until just before its first pose that goes into the static
-        map (``depths``; deeper than now when the robot already touches it) and waits there (the monitor re-judges every tick, so it never drives into the map); one
-        that cannot move a single step is dropped. Commands are ranked by, in order: fewer
-        steps within stop_margin of a point, the first such step later, more clearance at
-        the horizon's end (away from what comes); it must beat standing still."""
+        Each escape command drives until just before its first pose that goes into the
+        static map (``depths``; deeper than now when the robot already touches it) and waits
+        there (the monitor re-judges every tick, so it never drives into the map); one that
+        cannot move a single step is dropped. Commands are ranked by, in order: fewer steps
+        within stop_margin of a point, the first such step later, more clearance at the
+        horizon's end (away from what comes); it must beat standing still."""
         cfg = self.config
         if cfg.escape_limits is None or depths is None:
             return None

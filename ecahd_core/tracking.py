@@ -9,11 +9,11 @@ most ``max_baseline``):
 1. The earlier points within ``max_speed * dt + cluster_gap`` of the cluster are its candidates
    in the earlier scan; none -> velocity unknown (0: a new object is judged as static).
 2. Two initial shifts: 0 (standing still) and centroid(cluster) - centroid(candidates).
-3. From each, a translation-only, trimmed ICP refines t: each cluster point is matched to the nearest
-   point of the candidates' polyline (consecutive returns joined, so shifts finer than the beam
-   spacing count) shifted by t, the worst ``1 - trim`` of the matches are dropped, and t moves
-   by the mean residual; ``iterations`` times. The shift from the centroids wins only if its
-   residual is clearly (``tie_rms``) smaller: along a flat face no shift is observable.
+3. From each, a translation-only, trimmed ICP refines t: each cluster point is matched to the
+   nearest point of the candidates' polyline (consecutive returns joined, so shifts finer than
+   the beam spacing count) shifted by t, the worst ``1 - trim`` of the matches are dropped, and
+   t moves by the mean residual; ``iterations`` times. The shift from the centroids wins only
+   if its residual is clearly (``tie_rms``) smaller: along a flat face no shift is observable.
 4. v = t / dt; |v| < ``min_speed`` -> 0 (sensor noise and view changes on static objects); |v|
    above ``max_speed`` is clipped.
 

@@ -52,7 +52,8 @@ Publishes:
         "c_before", "c_after", "safe", "stamp"} per segment ("dd" when DD ran; ms = the local
         stage on the worker), and {"stage": "control", "ms", "reason", "monitor",
         "map_ready", "wall", "stamp"} after every control tick (``wall``: time.time() [s] at
-        publishing, for the inter-publish jitter; ``monitor``: none / slowdown / stop): the tick's wall time (``ecahd eval-bag`` reports its p50 / p99 apart from
+        publishing, for the inter-publish jitter; ``monitor``: none / slowdown / stop /
+        yield): the tick's wall time (``ecahd eval-bag`` reports its p50 / p99 apart from
         inference time).
 """
 from __future__ import annotations
