@@ -19,8 +19,8 @@ Every command (v, w) is checked before it reaches the base:
    again (step 3; stop if it fails).
 5. Else the command passes unchanged ("none").
 
-The static map (beyond Nav2): given the map's overlap depths (``depths``), every command that
-passes is also simulated over ``static_horizon`` and refused when it would bring the footprint
+The static map (beyond Nav2, off by default: ``static_horizon`` 0): given the map's overlap
+depths (``depths``), every command that passes is also simulated over ``static_horizon`` and refused when it would bring the footprint
 into the map (or deeper into it than now): the robot turns on the spot instead if that is
 clear, else stops. The planners keep a clearance margin from walls, but a tracker's arc cuts
 corners; the scan points the monitor sees are only the unmapped ones.
@@ -90,9 +90,14 @@ class CollisionMonitorConfig:
             stopped robot would be hit, and the escape commands.
         prediction_growth: [m/s] a moving point predicted t seconds ahead counts as this
             times min(t, time_to_collision) closer (its velocity is an estimate: errors up to
-            0.1 m/s measured, and a person may turn); 0 trusts the prediction.
+            0.1 m/s measured, and a person may turn); 0 trusts the prediction. 0 by default:
+            0.15 m/s made the robot yield so often that 13 of 20 moving-obstacle episodes
+            reached their goals, against 17 of 20 without it.
         static_horizon: [s] how far ahead every command is checked against the static map
-            (when the caller gives the map's depths): the tracker's arcs cut corners.
+            (when the caller gives the map's depths): the tracker's arcs cut corners; 0: not
+            checked. Off by default: in the closed loop (20 episodes) a robot whose pose lay
+            within the clearance margin of a wall was stopped for the rest of the episode
+            (1000-1500 ticks) in 2 episodes.
     """
 
     time_to_collision: float = 1.0
@@ -105,8 +110,8 @@ class CollisionMonitorConfig:
     slowdown_limits: tuple[float, float] | None = None
     escape_limits: tuple[float, float] | None = None
     yield_horizon: float = 3.0
-    prediction_growth: float = 0.15
-    static_horizon: float = 0.5
+    prediction_growth: float = 0.0
+    static_horizon: float = 0.0
 
     def __post_init__(self) -> None:
         for field in ("slowdown_limits", "escape_limits"):
@@ -117,10 +122,10 @@ class CollisionMonitorConfig:
                 raise EcahdError(f"{field} must be (max_v, max_w) or None, got {limits!r}")
             for name, value in zip(("max_v", "max_w"), limits):
                 check_real(_OWNER, f"{field} {name}", value, zero_ok=False)
-        for name in ("time_to_collision", "sim_dt", "slowdown_ratio", "yield_horizon",
-                     "static_horizon"):
+        for name in ("time_to_collision", "sim_dt", "slowdown_ratio", "yield_horizon"):
             check_real(_OWNER, name, getattr(self, name), zero_ok=False)
-        for name in ("slowdown_margin", "stop_margin", "source_timeout", "prediction_growth"):
+        for name in ("slowdown_margin", "stop_margin", "source_timeout", "prediction_growth",
+                     "static_horizon"):
             check_real(_OWNER, name, getattr(self, name), zero_ok=True)
         if self.slowdown_ratio > 1:
             raise EcahdError(f"slowdown_ratio must be in (0, 1], got {self.slowdown_ratio!r}")
@@ -184,7 +189,7 @@ class CollisionMonitor:
         self._reach_static = footprint.circumscribed_radius + cfg.slowdown_margin
         self._t = np.arange(cfg.steps + 1) * cfg.sim_dt  # (K+1,) [s]
         self._t_yield = np.arange(cfg.yield_steps + 1) * cfg.sim_dt  # (Ky+1,) [s]
-        self._t_static = np.arange(max(1, math.ceil(cfg.static_horizon / cfg.sim_dt - 1e-9))
+        self._t_static = np.arange(math.ceil(cfg.static_horizon / cfg.sim_dt - 1e-9)
                                    + 1) * cfg.sim_dt  # (Ks+1,) [s]
         self.last_escape: np.ndarray | None = None  # (Ky+1, 3) the last yield's poses
         self._last_yield: tuple[float, float] | None = None  # its command (v, w)
@@ -214,7 +219,8 @@ class CollisionMonitor:
             MonitorResult with the command to send.
         """
         result = self._filter_points(pose, v, w, points, points_stamp, now, velocities, depths)
-        if depths is None or result.action in ("stop", "yield") or \
+        if depths is None or self.config.static_horizon == 0 or \
+                result.action in ("stop", "yield") or \
                 self._static_ok(pose, result.v, result.w, depths):
             return result
         # the command would bring the footprint into (or deeper into) the map: turn on the
@@ -357,7 +363,13 @@ class CollisionMonitor:
         d = np.asarray(depths(np.concatenate([pose[None], poses.reshape(-1, 3)])),
                        dtype=np.float64)
         clear = (d[1:] <= max(float(d[0]), DEFAULT_TOLERANCE)).reshape(len(commands), -1)
-        best, best_key = None, self._escape_key(standing, False)
+        moving = vel.any(axis=1)  # (M,)
+        ahead = pts[moving] + t[-1] * vel[moving]  # (m, 2) [m] where the moving points will be
+
+        def away(xy: np.ndarray) -> float:  # [m] from the nearest of them at the horizon
+            return float(np.min(np.hypot(*(ahead - xy).T), initial=math.inf))
+
+        best, best_key = None, self._escape_key(standing, False, away(pose[:2]))
         # each command drives until its first refused step and waits there
         blocked = ~clear  # (C, Ky+1)
         stop_at = np.where(blocked.any(axis=1), np.argmax(blocked, axis=1), len(t))  # (C,)
@@ -370,7 +382,8 @@ class CollisionMonitor:
         clearance = self._clearance_at(driven.reshape(-1, 3), pts, vel, np.tile(t, len(movable)),
                                        reach=reach).reshape(len(movable), len(t), -1)
         for j, i in enumerate(movable):  # (C', Ky+1, M) ranked one by one
-            key = self._escape_key(clearance[j], commands[i] == self._last_yield)
+            key = self._escape_key(clearance[j], commands[i] == self._last_yield,
+                                   away(driven[j, -1, :2]))
             if key > best_key:
                 best, best_key, self.last_escape = i, key, driven[j]
         if best is None:
@@ -382,16 +395,17 @@ class CollisionMonitor:
         return cv, cw, (f"escape v={cv:.2f} m/s, w={cw:.2f} rad/s (touched in {touched} of "
                         f"{len(t)} steps; standing: from {float(t[stand_hit]):.2f} s)")
 
-    def _escape_key(self, clearance: np.ndarray, previous: bool) -> tuple[int, int, bool, float]:
+    def _escape_key(self, clearance: np.ndarray, previous: bool, away: float
+                    ) -> tuple[int, int, bool, float]:
         """Rank of an escape's (Ky+1, M) clearance: (-touched steps, first touched step (Ky+1
         if none), ``previous`` (the command of the last yield: kept on a tie, so the robot
-        does not dither between two escapes as the obstacle moves), clearance [m] at the last
-        step); larger is better."""
+        does not dither between two escapes as the obstacle moves), ``away`` [m] (how far
+        its last pose is from the moving points' predicted positions then)); larger is
+        better."""
         touched = np.count_nonzero(clearance <= self.config.stop_margin, axis=1) \
             >= self.config.min_points  # (Ky+1,)
         first = int(np.argmax(touched)) if touched.any() else len(touched)
-        return (-int(touched.sum()), first, previous,
-                float(clearance[-1].min(initial=math.inf)))
+        return -int(touched.sum()), first, previous, away
 
     # ---------------------------------------------------------------------------- geometry
     def simulate(self, pose, v: float, w: float, t: np.ndarray | None = None) -> np.ndarray:

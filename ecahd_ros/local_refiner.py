@@ -139,9 +139,10 @@ PARAMETERS = [
                                      "command that stays clear longest (static map checked)"),
     ParamSpec("monitor_yield_horizon", 3.0, "[s] how far ahead moving obstacles are predicted "
                                             "for yielding"),
-    ParamSpec("monitor_prediction_growth", 0.15, "[m/s] a moving obstacle predicted t s ahead "
-                                                 "counts as this times t closer (its velocity "
-                                                 "is an estimate); 0 trusts the prediction"),
+    ParamSpec("monitor_prediction_growth", 0.0, "[m/s] a moving obstacle predicted t s ahead "
+                                                "counts as this times min(t, "
+                                                "monitor_time_to_collision) closer (its "
+                                                "velocity is an estimate); 0 trusts it"),
     *shared("seed", "torch_threads"),
 ]
 POSE_HISTORY = 1.0  # [s] of odometry poses kept to place scans by their stamps

@@ -297,7 +297,10 @@ def test_a_command_into_the_static_map_turns_the_robot_on_the_spot_instead():
     # it). At 0.5 m/s with w = 0.3 the front reaches the wall within 0.5 s (0.25 m covered,
     # 0.1 m of space): refused; turning on the spot keeps x and passes; no scan points at all
     wall = lambda poses: np.where(poses[:, 0] + 0.4 > 0.5, poses[:, 0] - 0.1, -np.inf)  # noqa
-    monitor = CollisionMonitor(CIRCLE)
+    off = CollisionMonitor(CIRCLE)  # static_horizon 0 by default: not checked
+    assert off.filter(ORIGIN, 0.5, 0.3, np.zeros((0, 2)), 0.0, 0.0, depths=wall).action == \
+        "none"
+    monitor = CollisionMonitor(CIRCLE, CollisionMonitorConfig(static_horizon=0.5))
     result = monitor.filter(ORIGIN, 0.5, 0.3, np.zeros((0, 2)), 0.0, 0.0, depths=wall)
     assert (result.v, result.w, result.action) == (0.0, 0.3, "stop")
     assert "static map" in result.reason
