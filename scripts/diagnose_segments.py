@@ -1,0 +1,81 @@
+"""Where does ECAHD alone collide on a map? A diagnostic for issue 10 (not a benchmark).
+
+For seeded problems (``ecahd_core.problems.make_problems``), ECAHD plans with ``replan once``
+(SD best of 10, then the local stage on every segment) and every segment between two SD
+waypoints is judged by the exact checker: is a waypoint itself in a wall, does the straight
+segment collide, does the local stage's plan (DD + polishing) still collide; by segment length.
+
+    ECAHD_MODELS=DIR python scripts/diagnose_segments.py MAP.yaml [--problems 16] [--seed 7]
+"""
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+import torch
+
+from ecahd_core.collision import DEFAULT_TOLERANCE, check_collision, pose_depths
+from ecahd_core.cost import CollisionCost, CostConfig
+from ecahd_core.footprint import make_footprint
+from ecahd_core.maps import load_map
+from ecahd_core.model_zoo import load_model
+from ecahd_core.planner import DenseConfig, HierarchicalPlanner, SparseConfig, SparseDiffusion
+from ecahd_core.problems import make_problems
+
+BINS = ((0, 1), (1, 2), (2, 3), (3, 5), (5, 1000))  # [m] segment lengths
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("map", help="built-in map or Nav2 YAML (models via $ECAHD_MODELS)")
+    ap.add_argument("--problems", type=int, default=16)
+    ap.add_argument("--seed", type=int, default=7, help="seed of the problems")
+    ap.add_argument("--robot", default="circle")
+    ap.add_argument("--max-spacing", type=float, default=None, help="SparseConfig.max_spacing")
+    args = ap.parse_args()
+    torch.set_num_threads(1)
+    grid, fp = load_map(args.map), make_footprint(args.robot)
+    cost = CollisionCost.build(grid, fp, CostConfig()).as_tuple()
+    sd = SparseDiffusion(load_model("sd", grid, footprint=fp),
+                         SparseConfig(num_candidates=10, max_spacing=args.max_spacing), cost=cost)
+    hd = HierarchicalPlanner(sd, load_model("dd", grid, footprint=fp), costmap=cost[0],
+                             footprint_points=cost[1], cost_config=cost[2], dense=DenseConfig(),
+                             replan="once")
+    gen = torch.Generator().manual_seed(0)
+    rows = []  # (length [m], an end in a wall, straight free, local plan free)
+    free_plans = 0
+    for prob in make_problems(grid, args.problems, seed=args.seed):
+        t0 = time.perf_counter()
+        plan = hd.plan(prob.start, prob.goal, generator=gen)
+        ms = (time.perf_counter() - t0) * 1e3
+        wp = np.asarray(plan.global_plans[0])  # (P^g, 2) [m]
+        in_wall = pose_depths(np.c_[wp, np.zeros(len(wp))], fp, grid) > DEFAULT_TOLERANCE
+        for k, seg in enumerate(plan.segments):
+            rows.append((float(np.linalg.norm(wp[k + 1] - wp[k])), in_wall[k] or in_wall[k + 1],
+                         check_collision(wp[k:k + 2], fp, grid).collision_free,
+                         check_collision(seg, fp, grid).collision_free))
+        free = check_collision(plan.trajectory, fp, grid).collision_free
+        free_plans += free
+        print(f"SD path {np.linalg.norm(np.diff(wp, axis=0), axis=1).sum():6.1f} m, "
+              f"{int(in_wall.sum())} of {len(wp)} waypoints in a wall, plan "
+              f"{'free' if free else 'colliding'}, {ms:.0f} ms")
+    r = np.array(rows, dtype=float)
+    print(f"\n{free_plans} of {args.problems} plans collision-free; {len(r)} segments, mean "
+          f"length {r[:, 0].mean():.2f} m; a waypoint in a wall: {100 * r[:, 1].mean():.1f}%; "
+          f"straight colliding {100 * (1 - r[:, 2].mean()):.1f}%, after the local stage "
+          f"{100 * (1 - r[:, 3].mean()):.1f}%")
+    print("| segment length [m] | segments | a waypoint in a wall | straight colliding | "
+          "after DD + polishing colliding |\n|---|---:|---:|---:|---:|")
+    for lo, hi in BINS:
+        m = (r[:, 0] >= lo) & (r[:, 0] < hi)
+        if m.any():
+            print(f"| {lo}-{hi if hi < 1000 else ''} | {int(m.sum())} | {100 * r[m, 1].mean():.0f}% "
+                  f"| {100 * (1 - r[m, 2].mean()):.0f}% | {100 * (1 - r[m, 3].mean()):.0f}% |")
+    ok = r[:, 1] == 0
+    print(f"after the local stage, colliding among segments with both ends free: "
+          f"{100 * (1 - r[ok, 3].mean()):.1f}%")
+
+
+if __name__ == "__main__":
+    main()
