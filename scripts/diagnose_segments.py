@@ -6,6 +6,7 @@ waypoints is judged by the exact checker: is a waypoint itself in a wall, does t
 segment collide, does the local stage's plan (DD + polishing) still collide; by segment length.
 
     ECAHD_MODELS=DIR python scripts/diagnose_segments.py MAP.yaml [--problems 16] [--seed 7]
+        [--max-spacing M] [--snap]
 """
 from __future__ import annotations
 
@@ -33,6 +34,10 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=7, help="seed of the problems")
     ap.add_argument("--robot", default="circle")
     ap.add_argument("--max-spacing", type=float, default=None, help="SparseConfig.max_spacing")
+    ap.add_argument("--snap", action="store_true",
+                    help="move SD's waypoints that are in a wall to the nearest free position "
+                         "(navigation.snap_waypoints, what global_planner does) before the "
+                         "local stage")
     args = ap.parse_args()
     torch.set_num_threads(1)
     grid, fp = load_map(args.map), make_footprint(args.robot)
@@ -42,6 +47,18 @@ def main() -> None:
     hd = HierarchicalPlanner(sd, load_model("dd", grid, footprint=fp), costmap=cost[0],
                              footprint_points=cost[1], cost_config=cost[2], dense=DenseConfig(),
                              replan="once")
+    if args.snap:  # the experiment: SD's plan snapped before the local stage sees it
+        from dataclasses import replace
+
+        from ecahd_core.navigation import snap_waypoints
+
+        sample = sd.plan
+
+        def snapped_plan(*a, **kw):
+            out = sample(*a, **kw)
+            return replace(out, waypoints=snap_waypoints(grid, fp, out.waypoints)[0])
+
+        sd.plan = snapped_plan
     gen = torch.Generator().manual_seed(0)
     rows = []  # (length [m], an end in a wall, straight free, local plan free)
     free_plans = 0
