@@ -52,6 +52,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ecahd_core.collision import DEFAULT_TOLERANCE
 from ecahd_core.errors import EcahdError
 from ecahd_core.footprint import Footprint
 from ecahd_core.local_costmap import check_real
@@ -191,7 +192,6 @@ class CollisionMonitor:
         self._t_yield = np.arange(cfg.yield_steps + 1) * cfg.sim_dt  # (Ky+1,) [s]
         self._t_static = np.arange(math.ceil(cfg.static_horizon / cfg.sim_dt - 1e-9)
                                    + 1) * cfg.sim_dt  # (Ks+1,) [s]
-        self.last_escape: np.ndarray | None = None  # (Ky+1, 3) the last yield's poses
         self._last_yield: tuple[float, float] | None = None  # its command (v, w)
 
     # ------------------------------------------------------------------------------ filter
@@ -235,8 +235,6 @@ class CollisionMonitor:
     def _static_ok(self, pose, v: float, w: float, depths) -> bool:
         """The motion at (v, w) over static_horizon never goes deeper into the static map
         than the robot is now, nor into it when it is clear now."""
-        from ecahd_core.collision import DEFAULT_TOLERANCE
-
         d = np.asarray(depths(self.simulate(pose, v, w, self._t_static)), dtype=np.float64)
         return bool(np.all(d[1:] <= max(float(d[0]), DEFAULT_TOLERANCE)))
 
@@ -358,8 +356,6 @@ class CollisionMonitor:
         commands = [(fv * max_v, fw * max_w) for fv in _ESCAPE_V for fw in _ESCAPE_W
                     if (fv, fw) != (0.0, 0.0)]
         poses = np.stack([self.simulate(pose, cv, cw, t) for cv, cw in commands])  # (C, Ky+1, 3)
-        from ecahd_core.collision import DEFAULT_TOLERANCE
-
         d = np.asarray(depths(np.concatenate([pose[None], poses.reshape(-1, 3)])),
                        dtype=np.float64)
         clear = (d[1:] <= max(float(d[0]), DEFAULT_TOLERANCE)).reshape(len(commands), -1)
@@ -385,7 +381,7 @@ class CollisionMonitor:
             key = self._escape_key(clearance[j], commands[i] == self._last_yield,
                                    away(driven[j, -1, :2]))
             if key > best_key:
-                best, best_key, self.last_escape = i, key, driven[j]
+                best, best_key = i, key
         if best is None:
             self._last_yield = None
             return None

@@ -64,7 +64,7 @@ class Footprint:
             return float(self.radius)
         a = self.polygon
         b = np.roll(a, -1, axis=0)
-        return float(np.min(_point_segment_distance(np.zeros((1, 2)), a, b)))
+        return float(np.min(point_segment_distance(np.zeros((1, 2)), a, b)))
 
     def transformed(self, xy: np.ndarray, heading: np.ndarray, which: str = "points") -> np.ndarray:
         """Place the footprint at poses. xy: (..., 2) [m], heading: (...) [rad]
@@ -203,7 +203,7 @@ def _signed_area(poly: np.ndarray) -> float:
     return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
 
 
-def _point_segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def point_segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Distance from points p (N, 2) to segments a-b (M, 2) -> (N, M)."""
     ab = b - a
     ap = p[:, None, :] - a[None]

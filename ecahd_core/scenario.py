@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from ecahd_core.errors import EcahdError
+from ecahd_core.footprint import point_segment_distance
 
 SHAPES = ("box", "cylinder")
 CYLINDER_POLYGON_SIDES = 32  # footprint polygon of a cylinder (circumscribed, so never smaller)
@@ -407,7 +408,7 @@ def generate_scenario(grid, footprint, stops, *, static: int, moving: int, seed:
                 continue
             # its whole run keeps clear of the stops (the robot waits near them: a run through
             # a start would hit a robot that has not moved yet)
-            if _distance_to_segment(stops, ends[0], ends[1]).min() < keep_clear:
+            if point_segment_distance(stops, ends[0][None], ends[1][None]).min() < keep_clear:
                 continue
             # it must let the robot by at one end of its run at least: a cylinder shuttling
             # across a corridor no wider than the robot plus itself blocks it for good
@@ -429,13 +430,6 @@ def generate_scenario(grid, footprint, stops, *, static: int, moving: int, seed:
                                     f"{kinds.count('moving') + 1} of {moving} across the route")
             break
     return GeneratedScenario(tuple(obstacles), tuple(kinds), route)
-
-
-def _distance_to_segment(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(K,) distance [m] from each of the points (K, 2) to the segment a-b."""
-    ab = b - a
-    u = np.clip(((points - a) @ ab) / max(float(ab @ ab), 1e-18), 0.0, 1.0)  # (K,)
-    return np.linalg.norm(points - (a + u[:, None] * ab), axis=1)
 
 
 def _centre(o: Obstacle) -> np.ndarray:

@@ -114,13 +114,6 @@ class StaticClearance:
         self.grid = grid
         self._edt: np.ndarray | None = None  # (H+2, W+2) [m] distance transform, built lazily
 
-    def free(self, poses, footprint) -> np.ndarray:
-        """(N, 3) poses x [m], y [m], yaw [rad] -> (N,) bool: ``footprint`` placed there is
-        clear of the map (:meth:`depths` <= the exact checker's tolerance)."""
-        from ecahd_core.collision import DEFAULT_TOLERANCE
-
-        return self.depths(poses, footprint) <= DEFAULT_TOLERANCE
-
     def depths(self, poses, footprint) -> np.ndarray:
         """(N, 3) poses -> (N,) the exact checker's overlap depth [m] of ``footprint`` with the
         map (<= 0 or -inf: free). A pose whose cell lies farther than the circumscribed radius
