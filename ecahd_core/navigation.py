@@ -657,45 +657,4 @@ def detour(grid, footprint, start, goal, *, reach: float = 0.6) -> np.ndarray:
     return np.concatenate([start[None], middle, goal[None]])
 
 
-SNAP_DISTANCE = 0.2  # [m] a waypoint in collision moves at most this far (< waypoint_tolerance)
-SNAP_STEP = 0.025  # [m] spacing of the candidate positions searched
-
-
-def snap_waypoints(grid, footprint, waypoints, *, max_distance: float = SNAP_DISTANCE,
-                   step: float = SNAP_STEP) -> tuple[np.ndarray, int]:
-    """Move every waypoint after the first that the exact checker finds in collision (the
-    footprint placed there, facing along its incoming segment) to the nearest free position
-    within ``max_distance`` [m] (a square lattice of ``step``). Sparse Diffusion's waypoints
-    carry ~0.1-0.2 m of error, so a 0.4 m circle in a 1 m corridor often gets a waypoint in a
-    wall, which no local plan ending there can avoid. A waypoint with no free position within
-    reach stays (the local stage then reports its segment blocked).
-
-    waypoints: (P, 2) [m] -> (snapped (P, 2), how many moved)."""
-    from ecahd_core.collision import DEFAULT_TOLERANCE, pose_depths
-
-    xy = np.asarray(waypoints, dtype=np.float64).reshape(-1, 2).copy()
-    if len(xy) < 2:
-        return xy, 0
-    d = np.diff(xy, axis=0)
-    heading = np.concatenate([[0.0], np.arctan2(d[:, 1], d[:, 0])])  # (P,) incoming
-    depth = pose_depths(np.column_stack([xy, heading]), footprint, grid)
-    bad = [i for i in np.flatnonzero(depth > DEFAULT_TOLERANCE) if i > 0]
-    if not bad:
-        return xy, 0
-    n = int(max_distance / step)
-    off = np.stack(np.meshgrid(np.arange(-n, n + 1), np.arange(-n, n + 1)), -1).reshape(-1, 2)
-    off = off * step
-    dist = np.linalg.norm(off, axis=1)
-    off, dist = off[dist <= max_distance + 1e-9], dist[dist <= max_distance + 1e-9]
-    order = np.argsort(dist, kind="stable")
-    off = off[order]  # (K, 2) nearest first
-    moved = 0
-    for i in bad:
-        cand = xy[i] + off
-        inside = grid.in_bounds(cand)
-        poses = np.column_stack([cand, np.full(len(cand), heading[i])])[inside]
-        free = np.flatnonzero(pose_depths(poses, footprint, grid) <= DEFAULT_TOLERANCE)
-        if len(free):
-            xy[i] = poses[free[0], :2]
-            moved += 1
-    return xy, moved
+SNAP_DISTANCE = 0.2  # [m] a goal in collision moves at most this far (< waypoint_tolerance)

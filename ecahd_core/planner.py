@@ -129,6 +129,7 @@ class SparsePlan:
         best: index of the selected candidate.
         collision_costs: (N,) J collision cost of each candidate (None if not computed).
         time_ms: sampling + selection wall time.
+        placed: waypoints moved out of walls by the SparseDiffusion's ``placer`` (ours).
     """
 
     waypoints: np.ndarray
@@ -136,6 +137,7 @@ class SparsePlan:
     best: int
     collision_costs: np.ndarray | None
     time_ms: float
+    placed: int = 0
 
 
 class SparseDiffusion:
@@ -147,10 +149,15 @@ class SparseDiffusion:
         cost: (costmap, footprint_points, CostConfig) for the collision_aware rule and for
             guidance (optional otherwise).
         device: where the model runs.
+        placer: a :class:`~ecahd_core.placement.WaypointPlacer` (ours, beyond the paper):
+            the selected plan's waypoints that lie in a wall move to free space and legs that
+            cross a wall get a placed midpoint, before the plan is returned (and after
+            ``densify``); the start and goal stay.
+            None: SD's waypoints as sampled (the paper).
     """
 
     def __init__(self, checkpoint, config: SparseConfig | None = None, *, cost=None,
-                 device: str = "cpu") -> None:
+                 device: str = "cpu", placer=None) -> None:
         from ecahd_core.diffusion import DiffusionSampler, SamplerConfig
         from ecahd_core.model_zoo import sample_steps
 
@@ -165,6 +172,7 @@ class SparseDiffusion:
             raise EcahdError("SD guidance and the collision_aware rule need the cost J "
                              "(costmap, footprint points, CostConfig)")
         self.cost = cost
+        self.placer = placer
 
     def plan(self, start, goal, *, horizon: int | None = None,
              generator: torch.Generator | None = None, warm_start=None,
@@ -211,11 +219,20 @@ class SparseDiffusion:
         best = select_best(cands_np, np.asarray(goal, dtype=np.float64), epsilon=cfg.epsilon,
                            rule=cfg.selection, collision_costs=col,
                            collision_tolerance=cfg.collision_tolerance)
-        waypoints = cands_np[best]
+        waypoints, placed = self._place(cands_np[best])
         if densify and cfg.max_spacing is not None:
-            waypoints = self.densify(waypoints, generator=generator)
+            waypoints, more = self._place(self.densify(waypoints, generator=generator))
+            placed += more
         return SparsePlan(waypoints=waypoints, candidates=cands_np, best=best,
-                          collision_costs=col, time_ms=(time.perf_counter() - t0) * 1e3)
+                          collision_costs=col, time_ms=(time.perf_counter() - t0) * 1e3,
+                          placed=placed)
+
+    def _place(self, waypoints: np.ndarray) -> tuple[np.ndarray, int]:
+        """(P, 2) [m] -> (waypoints with those in a wall moved by ``placer``, how many moved);
+        unchanged without a placer."""
+        if self.placer is None or len(waypoints) <= 2:
+            return waypoints, 0
+        return self.placer(waypoints)
 
     def _collision_costs(self, cands: torch.Tensor, goals: torch.Tensor) -> np.ndarray | None:
         """J's collision cost of candidates (B, P, 2) [m] towards goals (2,) or (B, 2) -> (B,),

@@ -124,14 +124,14 @@ class StaticClearance:
 
         poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
         res = self.grid.resolution
-        near = self._wall_distance(poses[:, :2]) - math.sqrt(2.0) * res \
+        near = self.wall_distance(poses[:, :2]) - math.sqrt(2.0) * res \
             <= footprint.circumscribed_radius  # (N,)
         out = np.full(len(poses), -np.inf)
         if near.any():
             out[near] = pose_depths(poses[near], footprint, self.grid)
         return out
 
-    def _wall_distance(self, xy: np.ndarray) -> np.ndarray:
+    def wall_distance(self, xy: np.ndarray) -> np.ndarray:
         """(N, 2) [m] -> (N,) [m] distance from each point's cell centre to the nearest
         occupied cell centre of the static map (off the map: 0; beyond the map's edge counts
         as occupied, as for the exact checker)."""

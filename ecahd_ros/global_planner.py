@@ -73,8 +73,8 @@ from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ecahd_core.errors import EcahdError, PlanningError
-from ecahd_core.navigation import (REPLAN_POLICIES, GlobalRunner, GlobalRunnerConfig,
-                                   PlanRequest, validate_pose)
+from ecahd_core.navigation import (REPLAN_POLICIES, SNAP_DISTANCE, GlobalRunner,
+                                   GlobalRunnerConfig, PlanRequest, validate_pose)
 from ecahd_core.planner import SELECTION_RULES, SparseConfig, SparseDiffusion, SparsePlan
 from ecahd_ros.conversions import msg_to_grid, timing_message, xy_to_path
 from ecahd_ros.params import (ParamSpec, declare_parameters, make_robot, read_parameters,
@@ -98,6 +98,13 @@ PARAMETERS = [
     ParamSpec("max_spacing", 0.0, "[m] sd: waypoint spacing by distance, legs of a plan longer "
                                   "than this re-sampled by SD between their ends (for big "
                                   "maps); 0 = off (the paper's fixed P^g)"),
+    ParamSpec("place_reach", -1.0, "[m] sd: SD's waypoints that lie in a wall (map + remembered "
+                                   "obstacles) move into free space at most this far, and legs "
+                                   "crossing a wall get a placed midpoint (leg_repair); -1 = by "
+                                   "the map: 1.0 on maps over 50 000 cells, else off; off (or "
+                                   "<= 0.2): waypoints and the goal move at most 0.2 m"),
+    ParamSpec("leg_repair", 3, "sd: rounds of leg repair while place_reach is on (> 0.2 m); "
+                               "0 = off"),
     ParamSpec("ddim_steps", 0, "DDIM steps of SD or FD; 0 = the checkpoint's"),
     ParamSpec("epsilon", 1.0, "[m] goal-reaching radius of the best-of-N rule"),
     ParamSpec("selection", "collision_aware", f"best-of-N rule: {list(SELECTION_RULES)} "
@@ -128,6 +135,8 @@ class GlobalPlannerParams:
     num_candidates: int
     horizon: int
     max_spacing: float
+    place_reach: float
+    leg_repair: int
     ddim_steps: int
     epsilon: float
     selection: str
@@ -147,7 +156,9 @@ class GlobalPlannerParams:
         require_positive(self, "num_candidates", "epsilon", "waypoint_tolerance",
                          "torch_threads")
         require_non_negative(self, "ddim_steps", "footprint_padding", "seed", "replan_timeout",
-                             "obstacle_memory", "clearance_margin", "max_spacing")
+                             "obstacle_memory", "clearance_margin", "max_spacing", "leg_repair")
+        require(self.place_reach >= 0 or self.place_reach == -1, "place_reach",
+                self.place_reach, ">= 0 m, or -1 (by the map's size)")
         require(self.method in METHODS, "method", self.method, f"one of {list(METHODS)}")
         require(self.horizon >= 2, "horizon", self.horizon, ">= 2")
         require(self.selection in SELECTION_RULES, "selection", self.selection,
@@ -232,6 +243,7 @@ class GlobalPlanner(Node):
                                  STREAM_QOS)
         self.memory = None  # ecahd_core.sensing.ObstacleMemory of the scanned obstacles
         self._cost_cache = None  # (key of the fused grid, its J tuple)
+        self._placer_cache = None  # (key of the fused grid, its WaypointPlacer)
         self.fallbacks = 0  # A* fallbacks after repeated "blocked" replans
         # a goal coalesced in a burst is planned within one period even without odometry
         self.create_timer(p.runner_config().min_plan_interval, self._guard(self._on_pending))
@@ -291,6 +303,7 @@ class GlobalPlanner(Node):
 
         self.memory = ObstacleMemory(grid, p.obstacle_memory)
         self._cost_cache = (None, sparse.cost) if sparse is not None else None
+        self._placer_cache = None  # a new map: a new distance transform
         self.get_logger().info(f"map {grid.name!r} received ({grid.width} x {grid.height} "
                                f"cells); {p.method} planner built")
         if self.runner.goal is not None:
@@ -383,13 +396,33 @@ class GlobalPlanner(Node):
             return self.grid
         return self.memory.fused(self._now())
 
+    def _grid_key(self, grid):
+        """What tells fused grids apart for the caches: None for the static map."""
+        return None if grid is self.grid else grid.occupied.tobytes()
+
+    def _placer(self):
+        """The WaypointPlacer on :meth:`_fused_grid` (its distance transform is built once per
+        fused grid)."""
+        from ecahd_core.placement import WaypointPlacer, auto_reach
+
+        grid = self._fused_grid()
+        key = self._grid_key(grid)
+        if self._placer_cache is None or self._placer_cache[0] != key:
+            p = self.params
+            reach = auto_reach(self.grid) if p.place_reach < 0 else p.place_reach
+            on = reach > SNAP_DISTANCE  # off: the 0.2 m snap, no waypoint added
+            self._placer_cache = (key, WaypointPlacer(
+                grid, self.judged, reach=reach if on else SNAP_DISTANCE,
+                leg_rounds=p.leg_repair if on else 0))
+        return self._placer_cache[1]
+
     def _fused_cost(self):
         """J's (costmap, footprint points, config) on :meth:`_fused_grid`, rebuilt only when
         the remembered obstacles changed."""
         from ecahd_core.cost import CollisionCost
 
         grid = self._fused_grid()
-        key = None if grid is self.grid else grid.occupied.tobytes()
+        key = self._grid_key(grid)
         if self._cost_cache is None or self._cost_cache[0] != key:
             self._cost_cache = (key, CollisionCost.build(grid, self.footprint).as_tuple())
         return self._cost_cache[1]
@@ -452,12 +485,10 @@ class GlobalPlanner(Node):
             waypoints = self.fd.plan(start, goal, generator=self.generator)
             ms = (time.perf_counter() - t0) * 1e3
         waypoints[0], waypoints[-1] = start, goal  # exact ends (the models work in float32)
-        if method == "sd":  # SD's waypoints in a wall move to the nearest free pose (ours)
-            from ecahd_core.navigation import snap_waypoints
-
-            waypoints, moved = snap_waypoints(self._fused_grid(), self.judged, waypoints)
+        if method == "sd":  # SD's waypoints in a wall move into free space (ours)
+            waypoints, moved = self._placer()(waypoints, last_reach=SNAP_DISTANCE)
             if moved:
-                detail += f", {moved} waypoint(s) moved out of collision"
+                detail += f", {moved} waypoint(s) moved out of or added round walls"
         stamp = self.get_clock().now()
         self.runner.accept(waypoints, stamp.nanoseconds * 1e-9, hold=method == "fallback_astar")
         self._plan_pub.publish(xy_to_path(waypoints, self.params.global_frame, stamp.to_msg()))

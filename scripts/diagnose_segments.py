@@ -6,7 +6,7 @@ waypoints is judged by the exact checker: is a waypoint itself in a wall, does t
 segment collide, does the local stage's plan (DD + polishing) still collide; by segment length.
 
     ECAHD_MODELS=DIR python scripts/diagnose_segments.py MAP.yaml [--problems 16] [--seed 7]
-        [--max-spacing M] [--snap]
+        [--max-spacing M] [--place REACH [--leg-rounds N]]
 """
 from __future__ import annotations
 
@@ -21,6 +21,7 @@ from ecahd_core.cost import CollisionCost, CostConfig
 from ecahd_core.footprint import make_footprint
 from ecahd_core.maps import load_map
 from ecahd_core.model_zoo import load_model
+from ecahd_core.placement import WaypointPlacer
 from ecahd_core.planner import DenseConfig, HierarchicalPlanner, SparseConfig, SparseDiffusion
 from ecahd_core.problems import make_problems
 
@@ -34,31 +35,22 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=7, help="seed of the problems")
     ap.add_argument("--robot", default="circle")
     ap.add_argument("--max-spacing", type=float, default=None, help="SparseConfig.max_spacing")
-    ap.add_argument("--snap", action="store_true",
-                    help="move SD's waypoints that are in a wall to the nearest free position "
-                         "(navigation.snap_waypoints, what global_planner does) before the "
-                         "local stage")
+    ap.add_argument("--place", type=float, default=None, metavar="REACH",
+                    help="SD's waypoints in a wall moved into free space within REACH m "
+                         "(placement.WaypointPlacer, the SparseDiffusion's placer)")
+    ap.add_argument("--leg-rounds", type=int, default=3,
+                    help="with --place: rounds of leg repair (WaypointPlacer.repair; 0: off)")
     args = ap.parse_args()
     torch.set_num_threads(1)
     grid, fp = load_map(args.map), make_footprint(args.robot)
     cost = CollisionCost.build(grid, fp, CostConfig()).as_tuple()
     sd = SparseDiffusion(load_model("sd", grid, footprint=fp),
-                         SparseConfig(num_candidates=10, max_spacing=args.max_spacing), cost=cost)
+                         SparseConfig(num_candidates=10, max_spacing=args.max_spacing), cost=cost,
+                         placer=None if args.place is None else WaypointPlacer(
+                             grid, fp, reach=args.place, leg_rounds=args.leg_rounds))
     hd = HierarchicalPlanner(sd, load_model("dd", grid, footprint=fp), costmap=cost[0],
                              footprint_points=cost[1], cost_config=cost[2], dense=DenseConfig(),
                              replan="once")
-    if args.snap:  # the experiment: SD's plan snapped before the local stage sees it
-        from dataclasses import replace
-
-        from ecahd_core.navigation import snap_waypoints
-
-        sample = sd.plan
-
-        def snapped_plan(*a, **kw):
-            out = sample(*a, **kw)
-            return replace(out, waypoints=snap_waypoints(grid, fp, out.waypoints)[0])
-
-        sd.plan = snapped_plan
     gen = torch.Generator().manual_seed(0)
     rows = []  # (length [m], an end in a wall, straight free, local plan free)
     free_plans = 0

@@ -299,23 +299,6 @@ def test_a_scanned_blockage_sends_the_detour_through_the_other_corridor():
     assert np.all(detour(memory.fused(3.0), robot, start, goal)[:, 1] < 1.5)
 
 
-def test_waypoints_in_a_wall_snap_to_the_nearest_free_pose():
-    from ecahd_core.collision import check_collision
-    from ecahd_core.footprint import make_footprint
-    from ecahd_core.navigation import snap_waypoints
-
-    grid, robot = two_corridor_map(), make_footprint("circle")
-    # (3, 1.2) is 0.3 m from the wall block above (y = 1.5): the 0.4 m circle overlaps it by
-    # 0.1 m; the nearest free position is 0.1 m lower, within the 0.2 m reach
-    plan = np.array([[0.5, 0.75], [3.0, 1.2], [5.5, 0.75]])
-    snapped, moved = snap_waypoints(grid, robot, plan)
-    assert moved == 1 and snapped[1, 1] <= 1.1 + 1e-9 and abs(snapped[1, 0] - 3.0) < 0.1
-    np.testing.assert_array_equal(snapped[[0, 2]], plan[[0, 2]])
-    assert check_collision(snapped[1:2], robot, grid).collision_free
-    deep = np.array([[0.5, 0.75], [3.0, 2.0]])  # inside the block: nothing free within reach
-    assert snap_waypoints(grid, robot, deep)[1] == 0
-
-
 @pytest.mark.parametrize("robot", ["circle", "quadruped"])
 def test_static_clearance_agrees_with_the_exact_checker(robot):
     from ecahd_core.collision import DEFAULT_TOLERANCE, pose_depths

@@ -86,6 +86,7 @@ class PlanningBenchSettings:
     keep_better: bool = True  # DenseConfig's default; False = the paper's Algorithm 1
     replan: str = "every_waypoint"
     max_spacing: float | None = None  # [m] SparseConfig.max_spacing (None: off)
+    place_reach: float | None = None  # [m] placement.placer_for (0: off; None: by map size)
     warm_fraction: float = 0.0  # SparseConfig.warm_fraction: HD's warm-started re-plans (0: off)
     ablation: bool = True
     safety_net: bool = True  # ours: judge HD / ECAHD with and without the net (ecahd_core.safety)
@@ -165,12 +166,15 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
     from ecahd_core.footprint import make_footprint
     from ecahd_core.maps import load_map
     from ecahd_core.model_zoo import load_model
+    from ecahd_core.placement import placer_for
     from ecahd_core.planner import (DenseConfig, FullDiffusion, HierarchicalPlanner, SparseConfig,
                                     SparseDiffusion)
     from ecahd_core.problems import make_problems
     from ecahd_core.safety import SafetyNet, SafetyNetConfig
 
     grid = load_map(settings.map)
+    placed = placer_for(grid, make_footprint("circle"), settings.place_reach)
+    place_reach = 0.0 if placed is None else placed.reach  # what "auto" chose on this map
     problems = make_problems(grid, settings.problems, seed=settings.seed)
     cells, ablation, examples = [], [], {}
     astars = {}  # robot -> AStarPlanner: one clearance mask per map and robot, reused
@@ -200,7 +204,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                 guidance_weight=settings.guidance_weight,
                 guidance_space=settings.guidance_space,
                 warm_fraction=settings.warm_fraction, max_spacing=settings.max_spacing),
-                cost=cost)
+                cost=cost, placer=placer_for(grid, fp, settings.place_reach))
             if method == "sd":
                 plan_fn = lambda s, g: (sd.plan(s, g, generator=gen).waypoints, None)  # noqa: E731
             else:
@@ -281,7 +285,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                "dd_retries": settings.dd_retries, "polish_steps": settings.polish_steps,
                "keep_better": settings.keep_better,
                "replan": settings.replan, "warm_fraction": settings.warm_fraction,
-               "max_spacing": settings.max_spacing,
+               "max_spacing": settings.max_spacing, "place_reach": place_reach,
                "safety_net": settings.safety_net, "net_retries": settings.net_retries,
                "torch": torch.__version__,
                "threads": torch.get_num_threads()}
@@ -313,6 +317,8 @@ def format_markdown(r: PlanningBenchResult) -> str:
                 if c.get("warm_fraction") and c["replan"] == "every_waypoint" else "")
              + (f", waypoints at most {c['max_spacing']:g} m apart (SD re-samples longer legs)"
                 if c.get("max_spacing") else "")
+             + (f", SD's waypoints in walls placed in free space within {c['place_reach']:g} m "
+                "and legs crossing walls repaired" if c.get("place_reach") else "")
              + ", "
              f"torch {c['torch']} with {c['threads']} thread(s). Each cell: ours / paper"
              + ("." if c["map"] == "maze2d-large" else

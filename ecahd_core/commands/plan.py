@@ -64,6 +64,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-spacing", type=float, default=None, metavar="M",
                    help="[m] SD/ECAHD: waypoint spacing by distance, legs longer than this "
                         "re-sampled by SD between their ends (big maps; default: off)")
+    p.add_argument("--place-reach", type=float, default=None, metavar="R",
+                   help="[m] SD/ECAHD: SD's waypoints in a wall move into free space within R "
+                        "and legs crossing a wall get a placed midpoint (ours; 0: off; "
+                        "default: on at 1 m for maps over 50 000 cells, off on smaller ones)")
     p.add_argument("--candidates", type=int, default=10,
                    help="diffusion candidates sampled in one batch (best of N)")
     p.add_argument("--selection", default="collision_aware",
@@ -210,6 +214,7 @@ def _plan_diffusion(args, grid, footprint, start, goal):
     from ecahd_core.collision import densify
     from ecahd_core.cost import CollisionCost
     from ecahd_core.model_zoo import load_model
+    from ecahd_core.placement import placer_for
     from ecahd_core.planner import (DenseConfig, FullDiffusion, HierarchicalPlanner, SparseConfig,
                                     SparseDiffusion)
 
@@ -234,7 +239,8 @@ def _plan_diffusion(args, grid, footprint, start, goal):
                                     horizon=args.waypoints),
                          SparseConfig(num_candidates=args.candidates, horizon=args.waypoints,
                                       selection=args.selection, max_spacing=args.max_spacing,
-                                      guidance=(args.method == "sd" and guided)), cost=cost)
+                                      guidance=(args.method == "sd" and guided)), cost=cost,
+                         placer=placer_for(grid, footprint, args.place_reach))
     if args.method == "sd":
         sd.plan(start, goal, generator=gen())  # warm-up
         plan = sd.plan(start, goal, generator=gen())

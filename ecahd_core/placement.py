@@ -1,0 +1,221 @@
+"""Waypoints in free space (ours, beyond the paper; issue 10).
+
+Sparse Diffusion works in coordinates normalised by the map's size, so its waypoint error grows
+with the map: on a 60 x 60 m office 26-30% of the segments between SD's waypoints have a waypoint
+inside a wall, often deeper than 0.2 m (docs/RESULTS.md, "Where ECAHD alone collides on the
+office"). No local plan that ends in a wall is free, whatever DD and polishing do.
+:class:`WaypointPlacer` moves each such waypoint to a pose the footprint clears, within
+``reach``, choosing among the free positions the one whose straight legs to its neighbours
+cross the fewest walls (then the nearest): a waypoint pushed out of a wall on the wrong side
+would leave its segments crossing that wall.
+
+Cost: one distance transform of the map (built once per map, ~40 ms on 2000 x 2000 cells) and,
+for each waypoint in a wall, a lattice of candidate positions judged by the exact checker near
+walls and scored on the distance transform.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ecahd_core.errors import EcahdError
+
+PLACE_REACH = 1.0  # [m] how far a waypoint in a wall may move (docs/RESULTS.md, issue 10)
+PLACE_STEP = 0.05  # [m] candidate lattice (at least the map's resolution)
+LEG_WEIGHT = 4.0  # metres of displacement one metre of leg crossing a wall is worth
+LEG_ROUNDS = 3  # rounds of leg repair (a leg crossing a wall gets a placed midpoint)
+
+
+class WaypointPlacer:
+    """Moves the waypoints that the exact checker finds in collision into free space.
+
+    Args:
+        grid: the GridMap the waypoints must clear (occupied cells, off-map counts as occupied).
+        footprint: the robot's Footprint (judged facing along each waypoint's incoming leg).
+        reach: [m] the farthest a waypoint moves; one with no free position within reach stays.
+        step: [m] spacing of the candidate positions (None: max(PLACE_STEP, resolution)).
+        leg_rounds: rounds of :meth:`repair` after :meth:`place` (0: waypoints only).
+    """
+
+    def __init__(self, grid, footprint, *, reach: float = PLACE_REACH,
+                 step: float | None = None, leg_rounds: int = LEG_ROUNDS) -> None:
+        from ecahd_core.sensing import StaticClearance
+
+        if not (math.isfinite(reach) and reach > 0):
+            raise EcahdError(f"the waypoint placement's reach must be a finite number > 0 m, "
+                             f"got {reach}")
+        self.grid, self.footprint, self.reach = grid, footprint, float(reach)
+        self.step = float(step) if step is not None else max(PLACE_STEP, grid.resolution)
+        if leg_rounds < 0:
+            raise EcahdError(f"leg_rounds must be >= 0, got {leg_rounds}")
+        self.leg_rounds = int(leg_rounds)
+        self.clearance = StaticClearance(grid)
+        self._offsets = self.lattice(self.reach)
+        # a circle of the inscribed radius centred on a cell centre this near an occupied cell
+        # centre may overlap that cell (whose corner lies half a cell diagonal nearer)
+        self._near = footprint.inscribed_radius + math.sqrt(0.5) * grid.resolution
+
+    def __call__(self, waypoints, *, last_reach: float | None = 0.0) -> tuple[np.ndarray, int]:
+        """:meth:`place`, then :meth:`repair` (``leg_rounds``): (P, 2) [m] -> ((P', 2) [m],
+        waypoints moved or added)."""
+        xy, moved = self.place(waypoints, last_reach=last_reach)
+        xy, added = self.repair(xy)
+        return xy, moved + added
+
+    def lattice(self, reach: float) -> np.ndarray:
+        """(K, 2) [m] offsets of a square lattice of ``step`` within ``reach``, nearest first."""
+        n = int(reach / self.step)
+        off = np.stack(np.meshgrid(np.arange(-n, n + 1), np.arange(-n, n + 1)), -1)
+        off = off.reshape(-1, 2) * self.step
+        dist = np.linalg.norm(off, axis=1)
+        keep = dist <= reach + 1e-9
+        return off[keep][np.argsort(dist[keep], kind="stable")]
+
+    def blocked(self, waypoints) -> np.ndarray:
+        """(P, 2) [m] -> (P,) bool: the footprint placed at each waypoint, facing along its
+        incoming leg (the first along its outgoing one), overlaps the map."""
+        from ecahd_core.collision import DEFAULT_TOLERANCE
+
+        xy = np.asarray(waypoints, dtype=np.float64).reshape(-1, 2)
+        return self.clearance.depths(np.column_stack([xy, headings(xy)]),
+                                     self.footprint) > DEFAULT_TOLERANCE
+
+    def place(self, waypoints, *, last_reach: float | None = 0.0) -> tuple[np.ndarray, int]:
+        """Move every blocked waypoint after the first (the robot's start stays) to the free
+        position within reach whose straight legs to the previous and next waypoints cross the
+        least wall (length [m] of leg within the footprint's inscribed radius of an occupied
+        cell, weighted by LEG_WEIGHT), then the nearest. Waypoints are placed in order, so each
+        one's previous neighbour is already placed.
+
+        waypoints: (P, 2) [m]; last_reach: [m] the last waypoint's own reach (0: it stays, as a
+        goal the caller checked does; None: ``reach``).
+        Returns (placed (P, 2) [m] float64, how many moved)."""
+        xy = np.asarray(waypoints, dtype=np.float64).reshape(-1, 2).copy()
+        if len(xy) < 2 or not np.isfinite(xy).all():
+            return xy, 0
+        bad = np.flatnonzero(self.blocked(xy))
+        bad = bad[bad > 0]
+        last = len(xy) - 1
+        moved = 0
+        for i in bad.tolist():
+            reach = self.reach if i < last or last_reach is None else float(last_reach)
+            if reach <= 0:
+                continue
+            off = self._offsets if reach >= self.reach else self.lattice(reach)
+            nxt = xy[i + 1] if i < last else None
+            best = self._best(xy[i], off, xy[i - 1], nxt)
+            if best is not None:
+                xy[i] = best
+                moved += 1
+        return xy, moved
+
+    def repair(self, waypoints, *, rounds: int | None = None) -> tuple[np.ndarray, int]:
+        """Leg repair (ours): every straight leg that passes nearer a wall than the footprint
+        fits (:meth:`wall_length` > 0) gets a new waypoint, its midpoint placed (within half the
+        leg's length, at most ``reach``) where the two new legs cross the least wall; kept only
+        if that is less than the old leg's. ``rounds`` (default ``leg_rounds``) times.
+        waypoints: (P, 2) [m] -> ((P', 2) [m], P' - P waypoints added); the ends stay."""
+        xy = np.asarray(waypoints, dtype=np.float64).reshape(-1, 2)
+        added = 0
+        for _ in range(self.leg_rounds if rounds is None else rounds):
+            if len(xy) < 2:
+                break
+            walls = self.leg_walls(xy)  # (P - 1,)
+            if not (walls > 0).any():
+                break
+            pieces = [xy[:1]]
+            for k in range(len(xy) - 1):
+                a, b = xy[k], xy[k + 1]
+                if walls[k] > 0:
+                    reach = min(self.reach, 0.5 * float(np.linalg.norm(b - a)))
+                    mid = self._best(0.5 * (a + b), self.lattice(reach) if reach < self.reach
+                                     else self._offsets, a, b, need=walls[k])
+                    if mid is not None:
+                        pieces.append(mid[None])
+                        added += 1
+                pieces.append(b[None])
+            xy = np.concatenate(pieces)
+        return xy, added
+
+    def leg_walls(self, xy: np.ndarray) -> np.ndarray:
+        """(P, 2) [m] -> (P - 1,) :meth:`wall_length` of each straight leg."""
+        return np.array([float(self.wall_length(xy[k], xy[k + 1][None])[0])
+                         for k in range(len(xy) - 1)])
+
+    def _best(self, at: np.ndarray, off: np.ndarray, prev: np.ndarray, nxt: np.ndarray | None,
+              *, need: float | None = None) -> np.ndarray | None:
+        """The free position among ``at + off`` ((K, 2) [m], nearest first) with the least
+        LEG_WEIGHT x (wall length of the legs from ``prev`` and to ``nxt``) + distance from
+        ``at``; None if no position is free, or (with ``need``) none makes the legs cross less
+        wall than ``need`` [m]."""
+        from ecahd_core.collision import DEFAULT_TOLERANCE
+
+        cand = at + off
+        cand = cand[self.grid.in_bounds(cand)]
+        # the footprint cannot fit where the nearest wall is nearer than its inscribed radius
+        if len(cand):
+            near = self.clearance.wall_distance(cand) + math.sqrt(2.0) * self.grid.resolution
+            cand = cand[near > self.footprint.inscribed_radius]
+        if len(cand) == 0:
+            return None
+        d = cand - prev
+        heading = np.arctan2(d[:, 1], d[:, 0])  # facing along the incoming leg
+        depth = self.clearance.depths(np.column_stack([cand, heading]), self.footprint)
+        cand = cand[depth <= DEFAULT_TOLERANCE]
+        if len(cand) == 0:
+            return None
+        walls = self.wall_length(prev, cand)
+        if nxt is not None:
+            walls = walls + self.wall_length(nxt, cand)
+        score = LEG_WEIGHT * walls + np.linalg.norm(cand - at, axis=1)
+        k = int(np.argmin(score))  # argmin keeps the nearest among ties
+        if need is not None and not walls[k] < need:
+            return None
+        return cand[k]
+
+    def wall_length(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """Length [m] of each straight leg from ``a`` (2,) to ``b`` (K, 2) where a circle of the
+        footprint's inscribed radius may touch an occupied cell (the distance transform of cell
+        centres, less half a cell diagonal; samples one cell apart) -> (K,)."""
+        b = np.asarray(b, dtype=np.float64).reshape(-1, 2)
+        length = np.linalg.norm(b - a, axis=1)  # (K,)
+        n = max(2, int(math.ceil(float(length.max(initial=0.0)) / self.grid.resolution)) + 1)
+        t = np.linspace(0.0, 1.0, n)
+        pts = a + t[None, :, None] * (b - a)[:, None, :]  # (K, n, 2)
+        near = self.clearance.wall_distance(pts.reshape(-1, 2)).reshape(len(b), n) < self._near
+        return near.mean(axis=1) * length
+
+
+def headings(xy: np.ndarray) -> np.ndarray:
+    """(P, 2) [m] -> (P,) [rad]: each waypoint's incoming leg direction (the first: its
+    outgoing one)."""
+    if len(xy) < 2:
+        return np.zeros(len(xy))
+    d = np.diff(xy, axis=0)
+    h = np.arctan2(d[:, 1], d[:, 0])
+    return np.concatenate([h[:1], h])
+
+
+def placer_for(grid, footprint, reach: float | None = None, *,
+               leg_rounds: int = LEG_ROUNDS) -> WaypointPlacer | None:
+    """The SparseDiffusion ``placer`` the commands use: ``reach`` [m] > 0 places within it, 0
+    turns placement off (SD's waypoints as sampled, the paper), None chooses by the map: on
+    (PLACE_REACH) for maps over ``astar.COARSE_ABOVE_CELLS`` cells, the building maps where
+    SD's waypoint error exceeds a wall's thickness; off on smaller maps such as maze2d-large,
+    whose tables keep the paper's setting."""
+    if reach is None:
+        reach = auto_reach(grid)
+    if reach < 0 or not math.isfinite(reach):
+        raise EcahdError(f"the waypoint placement's reach must be >= 0 m (0: off), got {reach}")
+    if reach == 0:
+        return None
+    return WaypointPlacer(grid, footprint, reach=reach, leg_rounds=leg_rounds)
+
+
+def auto_reach(grid) -> float:
+    """[m] the placement ``reach`` chosen by the map: PLACE_REACH on maps over
+    ``astar.COARSE_ABOVE_CELLS`` cells, 0 (off) on smaller ones."""
+    from ecahd_core.astar import COARSE_ABOVE_CELLS
+
+    return PLACE_REACH if grid.width * grid.height > COARSE_ABOVE_CELLS else 0.0

@@ -1,0 +1,82 @@
+"""Waypoints in free space: placement.WaypointPlacer (issue 10)."""
+import numpy as np
+import pytest
+
+from ecahd_core.collision import check_collision
+from ecahd_core.errors import EcahdError
+from ecahd_core.footprint import make_footprint
+from ecahd_core.maps import GridMap
+from ecahd_core.placement import WaypointPlacer, placer_for
+
+
+def block_map(resolution: float = 0.1):
+    """A 6 x 4 m room with a wall block x in [1, 5], y in [1.5, 2.5] between a bottom corridor
+    (y < 1.5) and a top one (y > 2.5)."""
+    k = int(round(0.1 / resolution))
+    data = np.zeros((40 * k, 60 * k), dtype=np.int8)
+    data[15 * k:25 * k, 10 * k:50 * k] = 100
+    return GridMap(data, resolution, (0.0, 0.0), name="block")
+
+
+def test_a_waypoint_just_inside_a_wall_moves_to_the_nearest_free_pose():
+    grid, robot = block_map(), make_footprint("circle")
+    # (3, 1.2) is 0.3 m below the block: the 0.4 m circle overlaps it by 0.1 m; the nearest
+    # free positions are 0.1 m lower, and a little lower still the legs keep clear of the block
+    plan = np.array([[0.5, 0.75], [3.0, 1.2], [5.5, 0.75]])
+    placer = WaypointPlacer(grid, robot, leg_rounds=0)
+    assert placer.blocked(plan).tolist() == [False, True, False]
+    placed, moved = placer.place(plan)
+    assert moved == 1 and 0.9 <= placed[1, 1] <= 1.1 + 1e-9 and abs(placed[1, 0] - 3.0) < 0.1
+    np.testing.assert_array_equal(placed[[0, 2]], plan[[0, 2]])
+    assert check_collision(placed, robot, grid).collision_free
+
+
+def test_a_deep_waypoint_goes_to_the_side_its_legs_reach_not_the_nearest():
+    grid, robot = block_map(), make_footprint("circle")
+    # (3, 2.3): the top corridor is nearer (free from y = 2.9, 0.6 m away) than the bottom one
+    # (free up to y = 1.1, 1.2 m away), but the legs from and to the bottom corridor would cross
+    # the block from there
+    plan = np.array([[0.5, 0.75], [3.0, 2.3], [5.5, 0.75]])
+    placed, moved = WaypointPlacer(grid, robot, reach=1.5, leg_rounds=0).place(plan)
+    assert moved == 1 and placed[1, 1] <= 1.1 + 1e-9
+    assert check_collision(placed, robot, grid).collision_free
+    # out of reach: the waypoint stays where it was
+    stuck, moved = WaypointPlacer(grid, robot, reach=0.3, leg_rounds=0).place(plan)
+    assert moved == 0 and np.array_equal(stuck, plan)
+
+
+def test_the_goal_moves_only_within_its_own_reach():
+    grid, robot = block_map(), make_footprint("circle")
+    plan = np.array([[0.5, 0.75], [3.0, 1.2]])
+    placer = WaypointPlacer(grid, robot, leg_rounds=0)
+    assert placer.place(plan)[1] == 0  # last_reach 0: a goal the caller checked stays
+    placed, moved = placer.place(plan, last_reach=0.2)
+    assert moved == 1 and np.linalg.norm(placed[1] - plan[1]) <= 0.2 + 1e-9
+
+
+def test_leg_repair_bends_a_leg_that_crosses_a_wall_round_it():
+    grid, robot = block_map(0.05), make_footprint("circle")
+    plan = np.array([[0.5, 0.75], [5.5, 3.25]])  # both ends free, the straight leg crosses
+    assert not check_collision(plan, robot, grid).collision_free
+    placer = WaypointPlacer(grid, robot, reach=1.5, leg_rounds=4)
+    repaired, added = placer.repair(plan)
+    assert added >= 1 and len(repaired) == len(plan) + added
+    np.testing.assert_array_equal(repaired[[0, -1]], plan[[0, -1]])
+    assert check_collision(repaired, robot, grid).collision_free
+    assert placer.leg_walls(repaired).max() == 0
+    # a free leg is left alone
+    free = np.array([[0.5, 0.75], [5.5, 0.75]])
+    assert placer.repair(free)[1] == 0
+
+
+def test_placer_for_chooses_by_map_size_and_rejects_bad_reach():
+    robot = make_footprint("circle")
+    small = block_map()  # 2400 cells: off unless asked for
+    assert placer_for(small, robot) is None and placer_for(small, robot, 0.0) is None
+    assert placer_for(small, robot, 0.5).reach == 0.5
+    big = GridMap(np.zeros((300, 300), dtype=np.int8), 0.05, (0.0, 0.0), name="big")
+    assert isinstance(placer_for(big, robot), WaypointPlacer)
+    with pytest.raises(EcahdError, match="reach"):
+        placer_for(small, robot, -1.0)
+    with pytest.raises(EcahdError, match="reach"):
+        WaypointPlacer(small, robot, reach=float("nan"))
