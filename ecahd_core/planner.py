@@ -390,6 +390,8 @@ class HierarchicalPlan:
         local_costs: per iteration, (c^l before DD, c^l after DD or the same).
         timings_ms: wall time per stage: "sd", "j_check", "dd", "polish", "total".
         polished: per iteration, whether polishing moved the local plan (see DenseConfig).
+        placed: SD waypoints moved out of walls or added round them by the SparseDiffusion's
+            ``placer``, summed over the iterations' SD plans.
     """
 
     trajectory: np.ndarray
@@ -399,6 +401,7 @@ class HierarchicalPlan:
     local_costs: list
     timings_ms: dict
     polished: list = field(default_factory=list)
+    placed: int = 0
 
     @property
     def dd_calls(self) -> int:
@@ -578,6 +581,7 @@ class HierarchicalPlanner:
         t_total = time.perf_counter()
         times = {"sd": 0.0, "j_check": 0.0, "dd": 0.0, "polish": 0.0}
         global_plans, segments, dd_used, costs, polished = [], [], [], [], []
+        placed = 0
         if self.replan == "once":
             return self._plan_once(S, G, generator, t_total)
         # Algorithm 1 line 1: P^g - 1 iterations, the last one reaching G. With waypoint spacing
@@ -588,10 +592,11 @@ class HierarchicalPlanner:
         while True:
             t0 = time.perf_counter()
             forced = p >= P_g - 2 + MAX_EXTRA_ITERATIONS
-            waypoints = self.sparse.replan(S.numpy(), G.numpy(),
-                                           global_plans[-1] if global_plans else None,
-                                           horizon=max(2, P_g - p), generator=generator,
-                                           densify=not forced).waypoints  # lines 2-12
+            sparse = self.sparse.replan(S.numpy(), G.numpy(),
+                                        global_plans[-1] if global_plans else None,
+                                        horizon=max(2, P_g - p), generator=generator,
+                                        densify=not forced)  # lines 2-12
+            waypoints, placed = sparse.waypoints, placed + sparse.placed
             times["sd"] += (time.perf_counter() - t0) * 1e3
             last = len(waypoints) == 2
             wp = torch.as_tensor(waypoints, dtype=torch.float32)
@@ -614,7 +619,7 @@ class HierarchicalPlanner:
         times["total"] = (time.perf_counter() - t_total) * 1e3
         return HierarchicalPlan(trajectory=traj, global_plans=global_plans, segments=segments,
                                 dd_segments=dd_used, local_costs=costs, timings_ms=times,
-                                polished=polished)
+                                polished=polished, placed=placed)
 
     def _plan_once(self, S: torch.Tensor, G: torch.Tensor, generator, t_total: float
                    ) -> HierarchicalPlan:
@@ -626,8 +631,8 @@ class HierarchicalPlanner:
         P_g, P_l = self.sparse.config.horizon, self.dense.points
         times = {"sd": 0.0, "j_check": 0.0, "dd": 0.0, "polish": 0.0}
         t0 = time.perf_counter()
-        waypoints = self.sparse.plan(S.numpy(), G.numpy(), horizon=P_g,
-                                     generator=generator).waypoints
+        sparse = self.sparse.plan(S.numpy(), G.numpy(), horizon=P_g, generator=generator)
+        waypoints = sparse.waypoints
         times["sd"] = (time.perf_counter() - t0) * 1e3
         wp = torch.as_tensor(waypoints, dtype=torch.float32)
         a, b = wp[:-1], wp[1:]  # (P^g - 1, 2): t^g_p[0], t^g_p[1] of every iteration
@@ -669,7 +674,8 @@ class HierarchicalPlanner:
                                 global_plans=[waypoints[p:] for p in range(len(waypoints) - 1)],
                                 segments=segments, dd_segments=used.tolist(),
                                 local_costs=list(zip(c.tolist(), c_after.tolist())),
-                                timings_ms=times, polished=polished.tolist())
+                                timings_ms=times, polished=polished.tolist(),
+                                placed=sparse.placed)
 
 
 class FullDiffusion:

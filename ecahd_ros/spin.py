@@ -16,6 +16,11 @@
   executor threads got 58-101 of 300 control ticks in 15 s (gaps of 1-2 s, DD taking 3x its
   time); on one executor thread, with the local stage on its own worker thread, 304 of 300 and
   jitter p99 2.5 ms. So every node spins one executor thread; long work goes to a worker.
+- **A short GIL switch interval.** A worker thread running Python code (local_refiner's scan
+  fusion and motion tracker) keeps the GIL until CPython's switch interval (5 ms by default)
+  forces it to hand over, and the executor thread needs the GIL back several times per control
+  tick (every rcl call releases it): each hand-over could delay ``cmd_vel`` by up to 5 ms.
+  Nodes set ``sys.setswitchinterval`` to :data:`GIL_SWITCH_INTERVAL` (docs/RESULTS.md, issue 9).
 """
 from __future__ import annotations
 
@@ -31,6 +36,7 @@ from ecahd_core.errors import EcahdError
 
 ERROR_LOG_PERIOD = 5.0  # [s] the same exception text is logged at most once per period
 CONFIGURE_EXIT_CODE = 1  # exit status of a node that cannot configure
+GIL_SWITCH_INTERVAL = 0.0005  # [s] sys.setswitchinterval of every node (CPython's default: 5 ms)
 
 
 def spin_forever(executor, logger, *, period: float = 0.1) -> None:
@@ -81,6 +87,7 @@ def spin_node(make_node: Callable[[], Node], args=None, *, name: str = "node") -
 
     if os.environ.get(DIE_WITH_PARENT_ENV):
         die_with_parent()
+    sys.setswitchinterval(GIL_SWITCH_INTERVAL)
     rclpy.init(args=args)
     try:
         node = make_node()

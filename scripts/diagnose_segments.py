@@ -6,7 +6,7 @@ waypoints is judged by the exact checker: is a waypoint itself in a wall, does t
 segment collide, does the local stage's plan (DD + polishing) still collide; by segment length.
 
     ECAHD_MODELS=DIR python scripts/diagnose_segments.py MAP.yaml [--problems 16] [--seed 7]
-        [--max-spacing M] [--place REACH [--leg-rounds N]]
+        [--max-spacing M] [--place REACH [--leg-rounds N]] [--png FILE]
 """
 from __future__ import annotations
 
@@ -40,6 +40,7 @@ def main() -> None:
                          "(placement.WaypointPlacer, the SparseDiffusion's placer)")
     ap.add_argument("--leg-rounds", type=int, default=3,
                     help="with --place: rounds of leg repair (WaypointPlacer.repair; 0: off)")
+    ap.add_argument("--png", help="draw up to 8 segments still colliding after the local stage")
     args = ap.parse_args()
     torch.set_num_threads(1)
     grid, fp = load_map(args.map), make_footprint(args.robot)
@@ -54,7 +55,8 @@ def main() -> None:
     gen = torch.Generator().manual_seed(0)
     rows = []  # (length [m], an end in a wall, straight free, local plan free)
     free_plans = 0
-    for prob in make_problems(grid, args.problems, seed=args.seed):
+    shown = []  # (problem, segment, SD waypoints, trajectory, segment) still colliding
+    for n, prob in enumerate(make_problems(grid, args.problems, seed=args.seed)):
         t0 = time.perf_counter()
         plan = hd.plan(prob.start, prob.goal, generator=gen)
         ms = (time.perf_counter() - t0) * 1e3
@@ -64,6 +66,8 @@ def main() -> None:
             rows.append((float(np.linalg.norm(wp[k + 1] - wp[k])), in_wall[k] or in_wall[k + 1],
                          check_collision(wp[k:k + 2], fp, grid).collision_free,
                          check_collision(seg, fp, grid).collision_free))
+            if not rows[-1][3] and len(shown) < 8:
+                shown.append((n, k, wp, plan.trajectory, seg))
         free = check_collision(plan.trajectory, fp, grid).collision_free
         free_plans += free
         print(f"SD path {np.linalg.norm(np.diff(wp, axis=0), axis=1).sum():6.1f} m, "
@@ -84,6 +88,49 @@ def main() -> None:
     ok = r[:, 1] == 0
     print(f"after the local stage, colliding among segments with both ends free: "
           f"{100 * (1 - r[ok, 3].mean()):.1f}%")
+    worse = int(((r[:, 2] == 1) & (r[:, 3] == 0)).sum())
+    print(f"segments whose straight leg was free but the local stage's plan collides: {worse}")
+    if args.png:
+        draw(grid, fp, shown, args.png)
+
+
+def draw(grid, fp, shown, png: str) -> None:
+    """Up to 8 panels, 6 x 6 m round each colliding segment: the map, SD's waypoints (blue),
+    the plan (orange), the segment (red), the footprint at its two waypoints (green)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    if not shown:
+        print("no colliding segment to draw")
+        return
+    x0, y0, x1, y1 = grid.bounds
+    cols = min(4, len(shown))
+    rows = (len(shown) + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 3.4 * rows), squeeze=False)
+    for ax in axes.flat[len(shown):]:
+        ax.axis("off")
+    for ax, (n, k, wp, traj, seg) in zip(axes.flat, shown):
+        ax.imshow(grid.occupied, origin="lower", extent=(x0, x1, y0, y1), cmap="gray_r",
+                  interpolation="nearest")
+        ax.plot(traj[:, 0], traj[:, 1], "-", color="tab:orange", lw=1)
+        ax.plot(wp[:, 0], wp[:, 1], "o-", color="tab:blue", ms=3, lw=0.7)
+        ax.plot(seg[:, 0], seg[:, 1], "-", color="red", lw=1.6)
+        for p in wp[k:k + 2]:
+            ax.add_patch(plt.Circle(p, fp.circumscribed_radius, fill=False, color="tab:green"))
+        c = 0.5 * (wp[k] + wp[k + 1])
+        ax.set_xlim(c[0] - 3, c[0] + 3)
+        ax.set_ylim(c[1] - 3, c[1] + 3)
+        ax.set_title(f"problem {n}, segment {k} ({np.linalg.norm(wp[k + 1] - wp[k]):.1f} m)",
+                     fontsize=8)
+        ax.tick_params(labelsize=6)
+    fig.suptitle("still colliding after DD + polishing: SD's waypoints (blue), the plan "
+                 "(orange), the segment (red)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(png, dpi=90)
+    plt.close(fig)
+    print(f"wrote {png}")
 
 
 if __name__ == "__main__":

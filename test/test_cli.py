@@ -103,6 +103,24 @@ def test_plan_sd_through_walls_is_repaired_by_the_fallback(tmp_path):
     assert np.allclose(traj[0], [1.5, 1.5]) and np.allclose(traj[-1], [10.5, 7.5])
 
 
+def test_plan_places_sd_waypoints_out_of_walls_when_asked(tmp_path):
+    from ecahd_core.footprint import make_footprint
+    from ecahd_core.maps import load_map
+    from ecahd_core.placement import WaypointPlacer
+
+    rec = tmp_path / "p.json"
+    args = ["plan", "--method", "sd", "--robot", "circle", "--no-safety-net", "--json", str(rec),
+            "--png", str(tmp_path / "p.png")]
+    assert main(args) == 0  # maze2d-large is small: placement off by default
+    assert json.loads(rec.read_text())["waypoints_placed"] == 0
+    assert main(args + ["--place-reach", "1.0"]) == 0
+    r = json.loads(rec.read_text())
+    wp = np.array(r["waypoints"])
+    judge = WaypointPlacer(load_map("maze2d-large"), make_footprint("circle"))
+    assert r["waypoints_placed"] >= 0 and not judge.blocked(wp).any()
+    assert main(args + ["--place-reach", "-1"]) == 2  # a clear error, exit code 2
+
+
 def test_plan_without_a_safe_plan_exits_2_and_still_writes_the_record(tmp_path, capsys):
     # goal (1.5, 1.1) in maze2d-large's first cell: free, but 0.1 m from the wall below, so the
     # 0.4 m circle collides there whatever the path, and A* (clearance 0.4 m) cannot end there

@@ -109,6 +109,7 @@ def run(args: argparse.Namespace) -> int:
     goal = grid.validate_point(args.goal, "goal")
 
     candidates, dd_calls, dd_poses, segments, hd, astar = [], 0, None, None, None, None
+    placed = 0
     if args.method == "astar":
         t0 = time.perf_counter()
         planner = planner_for(grid, clearance_for_footprint(footprint, padding=args.padding))
@@ -120,8 +121,8 @@ def run(args: argparse.Namespace) -> int:
                    "total": (t2 - t0) * 1e3}
         astar = planner  # the net's fallback plans with the same clearance: reuse it
     else:
-        path, waypoints, candidates, timings, dd_calls, dd_poses, segments, hd = _plan_diffusion(
-            args, grid, footprint, start, goal)
+        path, waypoints, candidates, timings, dd_calls, dd_poses, segments, hd, placed = \
+            _plan_diffusion(args, grid, footprint, start, goal)
     safe = None
     if args.safety_net:
         import torch
@@ -169,7 +170,7 @@ def run(args: argparse.Namespace) -> int:
             "length_m": length, "success": success,
             "collision_free": bool(report.collision_free),
             "penetration_fraction": float(report.penetration_fraction),
-            "timings_ms": timings, "dd_calls": dd_calls,
+            "timings_ms": timings, "dd_calls": dd_calls, "waypoints_placed": placed,
             "replan": args.replan if args.method in ("ecahd", "hd") else None,
             "safety_net": bool(args.safety_net), "rule": rule,
             "collision_free_before_net": (bool(report.collision_free) if safe is None
@@ -207,7 +208,8 @@ def _guided(args) -> bool:
 
 def _plan_diffusion(args, grid, footprint, start, goal):
     """SD / FD / HD / ECAHD -> (path, waypoints, candidates, timings, dd_calls, dd_poses,
-    local segments (HD / ECAHD, else None), the HierarchicalPlanner (else None))."""
+    local segments (HD / ECAHD, else None), the HierarchicalPlanner (else None), SD waypoints
+    the placer moved or added)."""
     import numpy as np
     import torch
 
@@ -234,7 +236,7 @@ def _plan_diffusion(args, grid, footprint, start, goal):
         path = fd.plan(start, goal, generator=gen())
         ms = (time.perf_counter() - t0) * 1e3
         return (path, path[:: max(1, len(path) // 10)], [], {"fd": ms, "total": ms}, 0, None,
-                None, None)
+                None, None, 0)
     sd = SparseDiffusion(load_model("sd", grid, path=args.sd_model, footprint=footprint,
                                     horizon=args.waypoints),
                          SparseConfig(num_candidates=args.candidates, horizon=args.waypoints,
@@ -246,7 +248,7 @@ def _plan_diffusion(args, grid, footprint, start, goal):
         plan = sd.plan(start, goal, generator=gen())
         others = [c for i, c in enumerate(plan.candidates) if i != plan.best]
         return (plan.waypoints, plan.waypoints, others, {"sd": plan.time_ms, "total": plan.time_ms},
-                0, None, None, None)
+                0, None, None, None, plan.placed)
     hd = HierarchicalPlanner(sd, load_model("dd", grid, path=args.dd_model, footprint=footprint),
                              costmap=cost[0], footprint_points=cost[1], cost_config=cost[2],
                              dense=DenseConfig(guidance=guided, **polish), replan=args.replan)
@@ -257,4 +259,4 @@ def _plan_diffusion(args, grid, footprint, start, goal):
     dd_poses = (np.concatenate([densify(seg, step=0.15) for seg in refined])
                 if refined else np.zeros((0, 3)))
     return (plan.trajectory, plan.global_plans[0], [], dict(plan.timings_ms), plan.dd_calls,
-            dd_poses, plan.segments, hd)
+            dd_poses, plan.segments, hd, plan.placed)
