@@ -8,6 +8,7 @@ simulator and the refiner.
 """
 from __future__ import annotations
 
+import bisect
 import math
 import time
 from dataclasses import dataclass
@@ -64,6 +65,60 @@ def scan_points(pose, scan: Scan, offset=(0.0, 0.0, 0.0)) -> np.ndarray:
     a = syaw + scan.angle_min + scan.angle_increment * np.flatnonzero(valid)
     rv = r[valid]
     return np.stack([sx + rv * np.cos(a), sy + rv * np.sin(a)], axis=1)
+
+
+class PoseHistory:
+    """Odometry poses by their stamps, to place a scan with the pose at its own stamp (there is
+    no TF tree here). A scan stamped after the newest pose must wait for the next odometry:
+    placed with an older pose, a robot turning at 1.5 rad/s puts returns 8 m away 0.24 m off
+    the wall per 20 ms of difference, marks that narrow every door (measured on a 60 x 60 m
+    office, docs/RESULTS.md).
+
+    Args:
+        horizon: [s] of poses kept.
+    """
+
+    def __init__(self, horizon: float = 1.0) -> None:
+        self.horizon = float(horizon)
+        self._stamps: list[float] = []
+        self._poses: list[tuple[float, float, float]] = []
+
+    def add(self, stamp: float, pose) -> None:
+        """One odometry pose (x, y, yaw) at ``stamp`` [s]; an older stamp than the newest
+        resets the history (a restarted clock)."""
+        if self._stamps and stamp < self._stamps[-1]:
+            self._stamps.clear()
+            self._poses.clear()
+        self._stamps.append(float(stamp))
+        self._poses.append(tuple(float(v) for v in pose))
+        while len(self._stamps) > 2 and self._stamps[-1] - self._stamps[0] > self.horizon:
+            del self._stamps[0], self._poses[0]
+
+    @property
+    def newest(self) -> float | None:
+        """[s] the newest pose's stamp (None: no pose yet)."""
+        return self._stamps[-1] if self._stamps else None
+
+    def covers(self, stamp: float) -> bool:
+        """A pose at or after ``stamp`` [s] is known."""
+        return bool(self._stamps) and self._stamps[-1] >= stamp
+
+    def at(self, stamp: float):
+        """(x, y, yaw) at ``stamp`` [s]: interpolated between the poses either side of it (yaw
+        the short way round); the oldest or newest pose outside the history; None if empty."""
+        if not self._stamps:
+            return None
+        i = bisect.bisect_left(self._stamps, stamp)
+        if i == 0:
+            return self._poses[0]
+        if i == len(self._stamps):
+            return self._poses[-1]
+        t0, t1 = self._stamps[i - 1], self._stamps[i]
+        (x0, y0, a0), (x1, y1, a1) = self._poses[i - 1], self._poses[i]
+        f = 0.0 if t1 <= t0 else (stamp - t0) / (t1 - t0)
+        da = math.atan2(math.sin(a1 - a0), math.cos(a1 - a0))
+        yaw = a0 + f * da
+        return (x0 + f * (x1 - x0), y0 + f * (y1 - y0), math.atan2(math.sin(yaw), math.cos(yaw)))
 
 
 def fuse_grid(static: GridMap, mask: np.ndarray, origin: tuple[float, float]) -> GridMap:

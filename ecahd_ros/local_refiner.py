@@ -60,7 +60,6 @@ from __future__ import annotations
 
 import threading
 import time
-from collections import deque
 from dataclasses import dataclass
 from functools import partial
 
@@ -76,6 +75,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from ecahd_core.errors import EcahdError
 from ecahd_core.navigation import LocalRunner, LocalRunnerConfig, SegmentResult
 from ecahd_core.planner import DenseConfig
+from ecahd_core.sensing import PoseHistory
 from ecahd_core.worker import LatestWorker
 from ecahd_ros.conversions import (layout_to_msg, msg_to_grid, path_to_xy, timing_message,
                                    xy_to_path, yaw_from_quaternion)
@@ -146,6 +146,7 @@ PARAMETERS = [
     *shared("seed", "torch_threads"),
 ]
 POSE_HISTORY = 1.0  # [s] of odometry poses kept to place scans by their stamps
+SCAN_POSE_WAIT = 0.2  # [s] a scan waits at most this long for the odometry of its stamp
 DYNAMIC = ("max_v", "max_w", "max_accel", "lookahead", "waypoint_tolerance", "goal_tolerance",
            "stale_timeout", "plan_timeout")
 
@@ -304,7 +305,8 @@ class LocalRefiner(Node):
         self._scan_worker = LatestWorker(self._guard(self._fuse_scan), name="scan",
                                          on_error=report)
         self.runner = LocalRunner(p.runner_config())
-        self._poses: deque = deque()  # (odometry stamp [s], (x, y, yaw)) of the last second
+        self._poses = PoseHistory(POSE_HISTORY)  # odometry by stamp, to place the scans
+        self._pending_scan = None  # (Scan, monotonic time) waiting for its stamp's odometry
         self.world = None  # ecahd_core.sensing.LocalWorld once a map arrives (use_scan)
         self.refiner = None  # ecahd_core.navigation.SegmentRefiner once a map arrives
         self.monitor = None
@@ -314,7 +316,7 @@ class LocalRefiner(Node):
             self.monitor = CollisionMonitor(self.footprint, p.monitor_config())
         self.counters = {"monitor_stop": 0, "monitor_slowdown": 0, "monitor_yield": 0,
                          "blocked": 0,
-                         "rechecks_invalidated": 0, "scans": 0}
+                         "rechecks_invalidated": 0, "scans": 0, "scans_unsynced": 0}
         self._cmd_type = TwistStamped if p.enable_stamped_cmd_vel else Twist
         self._cmd_pub = self.create_publisher(self._cmd_type, "cmd_vel", STREAM_QOS)
         self._local_pub = self.create_publisher(Path, "local_plan", VIZ_QOS)
@@ -451,16 +453,21 @@ class LocalRefiner(Node):
         # the poses of the last second by their stamps: a scan is placed with the pose at its
         # own stamp (there is no TF here), not the latest one the robot has moved on from
         stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
-        self._poses.append((stamp, self.runner.pose))
-        while len(self._poses) > 2 and self._poses[-1][0] - self._poses[0][0] > POSE_HISTORY:
-            self._poses.popleft()
+        self._poses.add(stamp, self.runner.pose)
+        pending = self._pending_scan
+        if pending is not None and (self._poses.covers(pending[0].stamp)
+                                    or time.monotonic() - pending[1] > SCAN_POSE_WAIT):
+            self._pending_scan = None
+            self._submit_scan(pending[0])
 
-    def _pose_at(self, stamp: float):
-        """The odometry pose whose stamp is nearest ``stamp`` [s] (the latest if none)."""
-        poses = list(self._poses)
-        if not poses:
-            return self.runner.pose
-        return min(poses, key=lambda sp: abs(sp[0] - stamp))[1]
+    def _submit_scan(self, scan) -> None:
+        """Fuse ``scan`` on the scan worker with the odometry pose at its stamp (interpolated;
+        the newest pose when odometry never reached the stamp within SCAN_POSE_WAIT, counted
+        as ``scans_unsynced``)."""
+        if not self._poses.covers(scan.stamp):
+            self.counters["scans_unsynced"] += 1
+        pose = self._poses.at(scan.stamp) or self.runner.pose
+        self._scan_worker.submit((pose, scan))
 
     def _on_scan(self, msg: LaserScan) -> None:
         """Validate the scan and place it with the odometry pose at its stamp here; fuse it
@@ -476,7 +483,10 @@ class LocalRefiner(Node):
                         range_max=msg.range_max, stamp=stamp)
         except EcahdError as exc:
             raise EcahdError(f"scan ignored: {exc}") from None
-        self._scan_worker.submit((self._pose_at(stamp), scan))
+        if self._poses.covers(stamp):
+            self._submit_scan(scan)
+        else:  # odometry of its stamp not here yet: wait for it (a newer scan replaces it)
+            self._pending_scan = (scan, time.monotonic())
 
     def _fuse_scan(self, item) -> None:
         """(scan worker) Fuse a scan into the local costmap; re-judge the followed and prepared

@@ -238,3 +238,49 @@ def test_pure_pursuit_limits(yaw, expect_v):
         assert w == pytest.approx(0.5 * 2 * math.sin(math.atan2(0.2, 1.0)) / math.hypot(1, 0.2))
     else:  # target behind: slow down within max_accel and turn on the spot
         assert v == pytest.approx(0.35) and abs(w) == pytest.approx(1.5)
+
+
+def test_a_scan_waits_for_the_odometry_of_its_stamp(rig, monkeypatch):
+    """A scan that arrives before the odometry of its own stamp is placed with that pose (a
+    turning robot placed with the pose 20 ms older marks walls tens of cm off), not the
+    older one; a scan whose odometry never comes goes on after SCAN_POSE_WAIT, counted."""
+    from sensor_msgs.msg import LaserScan
+
+    from ecahd_ros import local_refiner
+
+    r = rig(use_scan=True)
+    r.send_map()
+    node, submitted = r.node, []
+    monkeypatch.setattr(node._scan_worker, "submit", submitted.append)
+
+    def odom(t, x, y, yaw):
+        msg = Odometry()
+        msg.header.frame_id = "map"
+        msg.header.stamp.sec, msg.header.stamp.nanosec = int(t), int(round((t % 1) * 1e9))
+        msg.pose.pose = pose_from_xy_yaw(x, y, yaw)
+        node._on_odom(msg)
+
+    def scan(t):
+        msg = LaserScan()
+        msg.header.frame_id = "base_scan"
+        msg.header.stamp.sec, msg.header.stamp.nanosec = int(t), int(round((t % 1) * 1e9))
+        msg.angle_min, msg.angle_increment = -math.pi, 2 * math.pi / 8
+        msg.range_min, msg.range_max = 0.1, 8.0
+        msg.ranges = [1.0] * 8
+        node._on_scan(msg)
+
+    odom(1.00, 1.5, 1.5, 0.0)
+    scan(1.02)
+    assert submitted == []  # its odometry is not here yet
+    odom(1.02, 1.51, 1.5, 0.03)
+    assert len(submitted) == 1
+    assert submitted[0][0] == pytest.approx((1.51, 1.5, 0.03))
+    scan(1.01)  # between two known poses: interpolated at once
+    assert submitted[1][0] == pytest.approx((1.505, 1.5, 0.015))
+    assert node.counters["scans_unsynced"] == 0
+    scan(9.0)  # a stamp the odometry never reaches
+    monkeypatch.setattr(local_refiner, "SCAN_POSE_WAIT", 0.0)
+    time.sleep(0.01)
+    odom(1.04, 1.52, 1.5, 0.06)
+    assert len(submitted) == 3 and submitted[2][0] == pytest.approx((1.52, 1.5, 0.06))
+    assert node.counters["scans_unsynced"] == 1
