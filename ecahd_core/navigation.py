@@ -454,29 +454,56 @@ class LocalRunner:
         """The world changed (a scan saw something): ``judge(plan (P, 2)) -> safe`` re-judges
         the rest of the followed local plan and every prepared one. A followed plan no longer
         safe is dropped (zero velocity) and its segment refined again from the robot's pose; a
-        prepared one is refined again. Returns how many plans were invalidated."""
+        prepared one is refined again. Returns how many plans were invalidated.
+
+        The same in two steps, so that a node judges without holding its lock (the exact
+        checker takes tens of ms per plan on a 0.03 m map): :meth:`recheck_items` (under the
+        lock), ``judge`` each item's plan (without it), :meth:`apply_recheck` (under it)."""
+        items = self.recheck_items()
+        return self.apply_recheck([(item, judge(item[-1]) if item[-1] is not None else True)
+                                   for item in items])
+
+    def recheck_items(self) -> list[tuple]:
+        """What :meth:`recheck` judges: (kind, key, token, plan (P, 2) or None) for the rest of
+        the followed plan ("followed"), each finished safe prepared plan ("prepared") and a
+        blocked target segment ("blocked", retried when the world changed; nothing to judge)."""
         if self.waypoints is None:
-            return 0
-        invalid = 0
+            return []
+        items: list[tuple] = []
         if self.tracker is not None and self.pose is not None:
             ahead = np.concatenate([np.array(self.pose[:2])[None],
                                     self.tracker.points[self.tracker.index:]])
-            if not judge(ahead):
-                invalid += 1
-                k = self.segment
-                self.tracker = self.current = None
-                self._target = k
-                self._starts[k] = np.array(self.pose[:2])
-                self._resubmit(k)
+            items.append(("followed", self.segment, self.tracker, ahead))
         for k, job in list(self._jobs.items()):
             if k < self._target or k == self.segment and self.tracker is not None:
                 continue
             if not job.done() or job.cancelled() or job.exception() is not None:
                 continue
-            if job.result().safe and not judge(job.result().plan):
+            if job.result().safe:
+                items.append(("prepared", k, job, job.result().plan))
+            elif k == self._target and self.tracker is None and self.pose is not None:
+                items.append(("blocked", k, job, None))
+        return items
+
+    def apply_recheck(self, verdicts: list[tuple[tuple, bool]]) -> int:
+        """Act on ((kind, key, token, plan), safe) pairs from :meth:`recheck_items`; an item
+        whose plan was replaced meanwhile (another tracker or job) is skipped. Returns how
+        many plans were invalidated."""
+        invalid = 0
+        for (kind, k, token, _), safe in verdicts:
+            if kind == "followed":
+                if self.tracker is token and self.pose is not None and not safe:
+                    invalid += 1
+                    self.tracker = self.current = None
+                    self._target = k
+                    self._starts[k] = np.array(self.pose[:2])
+                    self._resubmit(k)
+            elif self._jobs.get(k) is not token:
+                continue
+            elif kind == "prepared" and not safe:
                 invalid += 1
                 self._resubmit(k)
-            elif not job.result().safe and k == self._target and self.tracker is None \
+            elif kind == "blocked" and k == self._target and self.tracker is None \
                     and self.pose is not None:  # blocked: the world changed, try again
                 self._starts[k] = np.array(self.pose[:2])
                 self._resubmit(k)

@@ -506,7 +506,14 @@ class LocalRefiner(Node):
             if self.world is not world:  # a new map arrived meanwhile
                 return
             self.refiner.set_world(grid, costmap)
-            invalid = self.runner.recheck(self.refiner.judge)
+            items = self.runner.recheck_items()
+            judge = self.refiner.judge
+        # the exact checker without the lock: the control tick never waits for it
+        verdicts = [(item, True if item[-1] is None else judge(item[-1])) for item in items]
+        with self._lock:
+            if self.world is not world:
+                return
+            invalid = self.runner.apply_recheck(verdicts)
         if invalid:
             self.counters["rechecks_invalidated"] += invalid
             self.get_logger().info(f"scan: {invalid} local plan(s) now in collision with a "

@@ -156,6 +156,37 @@ def test_a_blocked_segment_is_never_followed():
     assert [k for k, _ in r.pop_events()] == ["blocked"]  # reported once
 
 
+def test_recheck_in_two_steps_drops_plans_a_scan_blocked_and_skips_replaced_ones():
+    """recheck = recheck_items (under a node's lock), judging (without it), apply_recheck:
+    the followed plan judged unsafe stops the robot and is refined again from its pose; a
+    verdict on a plan replaced meanwhile changes nothing."""
+    calls = []
+
+    def refine(a, b):
+        calls.append((tuple(a), tuple(b)))
+        return SegmentResult(plan=np.linspace(a, b, 4), c_before=0.0, c_after=0.0,
+                             stage="j_check")
+
+    r = runner(refine)
+    r.set_pose((0.0, 0.0, 0.0), 0.0)
+    r.set_plan(PLAN, 0.0)
+    assert r.tick(0.0).v > 0  # following segment 0, the next ones prepared
+    items = r.recheck_items()
+    kinds = [kind for kind, *_ in items]
+    assert kinds[0] == "followed" and "prepared" in kinds
+    assert all(plan is not None and plan.shape[1] == 2 for *_, plan in items)
+    # all still safe: nothing changes
+    assert r.apply_recheck([(item, True) for item in items]) == 0
+    n = len(calls)
+    # the followed plan is blocked now: dropped, refined again from the robot's pose
+    assert r.apply_recheck([(items[0], False)]) == 1
+    assert len(calls) == n + 1 and calls[-1][0] == (0.0, 0.0)
+    # the same stale verdict again (that tracker is gone): skipped
+    assert r.apply_recheck([(items[0], False)]) == 0 and len(calls) == n + 1
+    # the one-step form agrees
+    assert r.recheck(lambda plan: True) == 0
+
+
 def test_control_never_waits_for_the_local_stage():
     """The refine job runs on the worker; ticks meanwhile give zero (nothing safe yet), then
     the refined plan is followed."""
