@@ -20,7 +20,8 @@
   fusion and motion tracker) keeps the GIL until CPython's switch interval (5 ms by default)
   forces it to hand over, and the executor thread needs the GIL back several times per control
   tick (every rcl call releases it): each hand-over could delay ``cmd_vel`` by up to 5 ms.
-  Nodes set ``sys.setswitchinterval`` to :data:`GIL_SWITCH_INTERVAL` (docs/RESULTS.md, issue 9).
+  Nodes set ``sys.setswitchinterval`` to :data:`GIL_SWITCH_INTERVAL`. Its effect alone on the
+  closed loop's jitter has not been measured yet (docs/RESULTS.md, "Closed loop on the office").
 """
 from __future__ import annotations
 
