@@ -156,6 +156,25 @@ class GridMap:
         y = self.origin[1] + (np.asarray(row, dtype=np.float64) + 0.5) * self.resolution
         return np.stack([x, y], axis=-1)
 
+    def crop(self, xmin: float, ymin: float, xmax: float, ymax: float) -> "GridMap":
+        """The cells that overlap the box [xmin, xmax] x [ymin, ymax] [m] (clipped to the map),
+        on the same cell lattice; everything outside it then counts as off the map (occupied
+        when ``unknown_is_occupied``). The map itself if the box covers it."""
+        r0, c0 = (int(v) for v in self.world_to_cell(np.array([xmin, ymin])))
+        r1, c1 = (int(v) for v in self.world_to_cell(np.array([xmax, ymax])))
+        r0, c0 = max(r0, 0), max(c0, 0)
+        r1, c1 = min(r1 + 1, self.height), min(c1 + 1, self.width)
+        if r0 >= r1 or c0 >= c1:
+            raise MapError(f"map {self.name!r}: the box ({xmin:.2f}, {ymin:.2f}) - ({xmax:.2f}, "
+                           f"{ymax:.2f}) lies off the map")
+        if (r0, c0, r1, c1) == (0, 0, self.height, self.width):
+            return self
+        ox, oy = self.origin
+        return GridMap(self.data[r0:r1, c0:c1], self.resolution,
+                       (ox + c0 * self.resolution, oy + r0 * self.resolution), name=self.name,
+                       frame_id=self.frame_id, unknown_is_occupied=self.unknown_is_occupied,
+                       occupied_threshold=self.occupied_threshold)
+
     def in_bounds(self, xy: np.ndarray) -> np.ndarray:
         """(..., 2) -> (...) bool: the point lies on the map (NaN is never on the map)."""
         xy = np.asarray(xy, dtype=np.float64)

@@ -652,17 +652,38 @@ class SegmentRefiner:
         return out
 
 
-def detour(grid, footprint, start, goal, *, reach: float = 0.6) -> np.ndarray:
+DETOUR_MARGIN = 8.0  # [m] detour's first search: the box round start and goal grown by this
+
+
+def detour(grid, footprint, start, goal, *, reach: float = 0.6,
+           margin: float | None = DETOUR_MARGIN) -> np.ndarray:
     """A path round what ``grid`` knows (e.g. the static map fused with the local costmap):
     A* with the footprint's clearance between the traversable cells nearest ``start`` and
     ``goal`` (within ``reach`` m, in one connected region), joined to both by a straight hop,
     so a pose or goal in a cell whose clearance A*'s grid rounds down still gets a path (the
     exact checker judges every hop). start, goal: (2,) [m] -> (N, 2) [m], start first, goal
-    last. Raises PlanningError when no region holds both."""
+    last. Raises PlanningError when no region holds both.
+
+    On a big map the search first runs on the box round start and goal grown by ``margin`` m
+    (outside it counts as occupied, so its paths are safe), the whole map only if that finds
+    none: on a 60 x 60 m map at 0.03 m a whole-map detour takes 2-4 s. None: the whole map."""
+    start, goal = (np.asarray(p, dtype=np.float64).reshape(2) for p in (start, goal))
+    if margin is not None:
+        lo, hi = np.minimum(start, goal) - margin, np.maximum(start, goal) + margin
+        box = grid.crop(lo[0], lo[1], hi[0], hi[1])
+        if box is not grid:
+            try:
+                return _detour(box, footprint, start, goal, reach)
+            except PlanningError:
+                pass
+    return _detour(grid, footprint, start, goal, reach)
+
+
+def _detour(grid, footprint, start: np.ndarray, goal: np.ndarray, reach: float) -> np.ndarray:
+    """:func:`detour` on ``grid`` as it is."""
     from ecahd_core.astar import AStarPlanner, clearance_for_footprint
 
     planner = AStarPlanner(grid, clearance_for_footprint(footprint))
-    start, goal = (np.asarray(p, dtype=np.float64).reshape(2) for p in (start, goal))
     rows, cols = np.nonzero(planner.mask)
     centres = grid.cell_to_world(rows, cols)  # (K, 2) traversable cell centres
     labels = planner.components[rows, cols]

@@ -166,3 +166,17 @@ def test_signed_distance_values():
     big = GridMap(data=np.zeros((7, 7), np.int8), resolution=0.5)
     sdf = signed_distance(big)
     assert sdf[3, 3] == pytest.approx(3.5 * 0.5)  # centre cell: 3.5 cells from the map edge
+
+
+def test_crop_keeps_the_lattice_and_clips_to_the_map():
+    data = np.zeros((40, 60), dtype=np.int8)
+    data[10, 20] = 100
+    grid = GridMap(data, 0.1, (1.0, 2.0), name="c")
+    box = grid.crop(2.95, 2.55, 3.55, 3.25)  # cells cols 19..25, rows 5..12
+    assert box.origin == pytest.approx((2.9, 2.5)) and box.data.shape == (8, 7)
+    assert box.occupied[5, 1] and box.occupied.sum() == 1  # cell (10, 20) of the map
+    assert grid.crop(-10, -10, 100, 100) is grid  # covers the map: the map itself
+    clipped = grid.crop(0.0, 0.0, 1.45, 2.25)
+    assert clipped.origin == pytest.approx((1.0, 2.0)) and clipped.data.shape == (3, 5)
+    with pytest.raises(MapError, match="off the map"):
+        grid.crop(50, 50, 60, 60)

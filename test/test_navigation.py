@@ -345,3 +345,24 @@ def test_static_clearance_agrees_with_the_exact_checker(robot):
     fast = StaticClearance(grid).depths(poses, fp) <= DEFAULT_TOLERANCE
     assert np.array_equal(fast, exact)
     assert 0.05 < exact.mean() < 0.95  # both answers occur
+
+
+def test_detour_searches_near_first_and_falls_back_to_the_whole_map():
+    from ecahd_core.collision import check_collision
+    from ecahd_core.footprint import make_footprint
+    from ecahd_core.maps import GridMap
+    from ecahd_core.navigation import detour
+
+    data = two_corridor_map().data.copy()
+    data[:15, 30] = 100  # the bottom corridor closed wall to wall at x = 3
+    grid = GridMap(data, 0.1, (0.0, 0.0), name="closed")
+    robot = make_footprint("circle")
+    start, goal = (0.5, 0.75), (5.5, 0.75)
+    # the box round start and goal grown by 0.3 m holds no way: the whole map is searched
+    near = detour(grid, robot, start, goal, margin=0.3)
+    assert near[:, 1].max() > 2.5 and check_collision(near, robot, grid).collision_free
+    np.testing.assert_allclose(near, detour(grid, robot, start, goal, margin=None))
+    # a box that holds the way gives a path inside it
+    open_grid = two_corridor_map()
+    inside = detour(open_grid, robot, start, goal, margin=0.5)
+    assert inside[:, 1].max() < 1.5 and check_collision(inside, robot, open_grid).collision_free
