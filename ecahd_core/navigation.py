@@ -459,9 +459,7 @@ class LocalRunner:
         The same in two steps, so that a node judges without holding its lock (the exact
         checker takes tens of ms per plan on a 0.03 m map): :meth:`recheck_items` (under the
         lock), ``judge`` each item's plan (without it), :meth:`apply_recheck` (under it)."""
-        items = self.recheck_items()
-        return self.apply_recheck([(item, judge(item[-1]) if item[-1] is not None else True)
-                                   for item in items])
+        return self.apply_recheck(judge_items(self.recheck_items(), judge))
 
     def recheck_items(self) -> list[tuple]:
         """What :meth:`recheck` judges: (kind, key, token, plan (P, 2) or None) for the rest of
@@ -650,6 +648,12 @@ class SegmentRefiner:
         out = plan.detach().numpy().astype(np.float64)
         out[0], out[-1] = a, b  # exact ends (the models work in float32)
         return out
+
+
+def judge_items(items: list[tuple], judge: Callable[[np.ndarray], bool]) -> list[tuple]:
+    """:meth:`LocalRunner.recheck_items` -> the (item, safe) verdicts
+    :meth:`LocalRunner.apply_recheck` takes; an item with no plan to judge counts as safe."""
+    return [(item, True if item[-1] is None else judge(item[-1])) for item in items]
 
 
 DETOUR_MARGIN = 8.0  # [m] detour's first search: the box round start and goal grown by this

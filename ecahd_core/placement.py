@@ -72,6 +72,10 @@ class WaypointPlacer:
         keep = dist <= reach + 1e-9
         return off[keep][np.argsort(dist[keep], kind="stable")]
 
+    def _within(self, reach: float) -> np.ndarray:
+        """:meth:`lattice` of ``reach`` (the one built for ``self.reach`` if it reaches as far)."""
+        return self._offsets if reach >= self.reach else self.lattice(reach)
+
     def blocked(self, waypoints) -> np.ndarray:
         """(P, 2) [m] -> (P,) bool: the footprint placed at each waypoint, facing along its
         incoming leg (the first along its outgoing one), overlaps the map."""
@@ -102,9 +106,8 @@ class WaypointPlacer:
             reach = self.reach if i < last or last_reach is None else float(last_reach)
             if reach <= 0:
                 continue
-            off = self._offsets if reach >= self.reach else self.lattice(reach)
             nxt = xy[i + 1] if i < last else None
-            best = self._best(xy[i], off, xy[i - 1], nxt)
+            best = self._best(xy[i], self._within(reach), xy[i - 1], nxt)
             if best is not None:
                 xy[i] = best
                 moved += 1
@@ -129,8 +132,7 @@ class WaypointPlacer:
                 a, b = xy[k], xy[k + 1]
                 if walls[k] > 0:
                     reach = min(self.reach, 0.5 * float(np.linalg.norm(b - a)))
-                    mid = self._best(0.5 * (a + b), self.lattice(reach) if reach < self.reach
-                                     else self._offsets, a, b, need=walls[k])
+                    mid = self._best(0.5 * (a + b), self._within(reach), a, b, need=walls[k])
                     if mid is not None:
                         pieces.append(mid[None])
                         added += 1

@@ -73,7 +73,8 @@ from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ecahd_core.errors import EcahdError
-from ecahd_core.navigation import LocalRunner, LocalRunnerConfig, SegmentResult
+from ecahd_core.navigation import (LocalRunner, LocalRunnerConfig, SegmentResult,
+                                   judge_items)
 from ecahd_core.planner import DenseConfig
 from ecahd_core.sensing import PoseHistory
 from ecahd_core.worker import LatestWorker
@@ -509,7 +510,7 @@ class LocalRefiner(Node):
             items = self.runner.recheck_items()
             judge = self.refiner.judge
         # the exact checker without the lock: the control tick never waits for it
-        verdicts = [(item, True if item[-1] is None else judge(item[-1])) for item in items]
+        verdicts = judge_items(items, judge)
         with self._lock:
             if self.world is not world:
                 return

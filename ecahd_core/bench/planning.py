@@ -166,15 +166,15 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
     from ecahd_core.footprint import make_footprint
     from ecahd_core.maps import load_map
     from ecahd_core.model_zoo import load_model
-    from ecahd_core.placement import placer_for
+    from ecahd_core.placement import auto_reach, placer_for
     from ecahd_core.planner import (DenseConfig, FullDiffusion, HierarchicalPlanner, SparseConfig,
                                     SparseDiffusion)
     from ecahd_core.problems import make_problems
     from ecahd_core.safety import SafetyNet, SafetyNetConfig
 
     grid = load_map(settings.map)
-    placed = placer_for(grid, make_footprint("circle"), settings.place_reach)
-    place_reach = 0.0 if placed is None else placed.reach  # what "auto" chose on this map
+    place_reach = (auto_reach(grid) if settings.place_reach is None  # what "auto" chose
+                   else settings.place_reach)
     problems = make_problems(grid, settings.problems, seed=settings.seed)
     cells, ablation, examples = [], [], {}
     astars = {}  # robot -> AStarPlanner: one clearance mask per map and robot, reused
