@@ -178,10 +178,28 @@ class LocalCostmap:
             self._seen = _shifted(self._seen, dr, dc, False)
         self._row0, self._col0 = row, col
 
+    def forget(self, xy, radius: float) -> int:
+        """Remove the marks of the cells whose centres lie within ``radius`` [m] of any of the
+        world points ``xy`` (K, 2) [m], e.g. those a moving obstacle left before its motion
+        was known. -> number of marks removed."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        if len(xy) == 0 or self._row0 is None:
+            return 0
+        rows, cols = np.nonzero(self._last_seen > _UNMARKED)  # (S,) marked cells
+        if len(rows) == 0:
+            return 0
+        ox, oy = self.origin
+        centres = np.stack([ox + (cols + 0.5) * self.resolution,
+                            oy + (rows + 0.5) * self.resolution], axis=-1)  # (S, 2)
+        d2 = np.min(np.sum((centres[:, None, :] - xy[None, :, :]) ** 2, axis=-1), axis=1)
+        gone = d2 <= radius * radius
+        self._last_seen[rows[gone], cols[gone]] = _UNMARKED
+        return int(np.count_nonzero(gone))
+
     # ------------------------------------------------------------------------------ update
     def update(self, pose, ranges, *, angle_min: float, angle_increment: float,
                range_min: float, range_max: float, stamp: float,
-               sensor_offset=(0.0, 0.0, 0.0)) -> ScanUpdate:
+               sensor_offset=(0.0, 0.0, 0.0), mark=None) -> ScanUpdate:
         """Apply one LaserScan.
 
         Args:
@@ -192,6 +210,9 @@ class LocalCostmap:
             range_min, range_max: [m] LaserScan fields.
             stamp: [s] the scan's time, for ``persistence``.
             sensor_offset: (3,) x [m], y [m], yaw [rad] of the sensor in the robot frame.
+            mark: (N,) bool or None (all): which returns may mark their cell. A return left
+                out still clears its ray up to (not including) its cell, e.g. one on a moving
+                obstacle, which the collision monitor judges by its velocity instead.
 
         Returns:
             ScanUpdate counts.
@@ -226,6 +247,12 @@ class LocalCostmap:
             finite = np.isfinite(r) & (r >= range_min) & (r <= range_max)  # (N,) a return
         no_return = r == np.inf  # (N,) nothing within range_max: clears, never marks
         hit = finite & (r <= cfg.obstacle_range)  # (N,) returns that mark
+        if mark is not None:
+            mark = np.asarray(mark, dtype=bool)
+            if mark.shape != r.shape:
+                raise EcahdError(f"mark must be (N,) like the ranges {r.shape}, got "
+                                 f"{mark.shape}")
+            hit &= mark
         ignored = int(r.size - np.count_nonzero(finite | no_return))
 
         cleared = 0

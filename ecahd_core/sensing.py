@@ -11,6 +11,7 @@ from __future__ import annotations
 import bisect
 import math
 import time
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,6 +22,8 @@ from ecahd_core.maps import GridMap
 from ecahd_core.tracking import MotionTracker, TrackerConfig
 
 SCAN_MAX_BEAMS = 100_000  # a scan with more beams is rejected
+MOVER_MEMORY = 1.0  # [s] a return near one that moved this recently is not marked (LocalWorld)
+MOVER_GAP = 0.3  # [m] ... "near": the tracker's cluster gap
 
 
 @dataclass(frozen=True)
@@ -56,14 +59,21 @@ def sensor_pose(pose, offset) -> tuple[float, float, float]:
     return x + c * ox - s * oy, y + s * ox + c * oy, yaw + oyaw
 
 
+def valid_beams(scan: Scan) -> np.ndarray:
+    """(M,) indices of the scan's valid returns (finite, within [range_min, range_max]), in
+    beam order: the rows of :func:`scan_points`."""
+    r = scan.ranges
+    with np.errstate(invalid="ignore"):
+        return np.flatnonzero(np.isfinite(r) & (r >= scan.range_min) & (r <= scan.range_max))
+
+
 def scan_points(pose, scan: Scan, offset=(0.0, 0.0, 0.0)) -> np.ndarray:
     """World (x, y) [m] of the scan's valid returns (finite, within [range_min, range_max]):
-    (M, 2)."""
+    (M, 2), in beam order."""
     sx, sy, syaw = sensor_pose(pose, offset)
-    r = scan.ranges
-    valid = np.isfinite(r) & (r >= scan.range_min) & (r <= scan.range_max)
-    a = syaw + scan.angle_min + scan.angle_increment * np.flatnonzero(valid)
-    rv = r[valid]
+    beams = valid_beams(scan)
+    a = syaw + scan.angle_min + scan.angle_increment * beams
+    rv = scan.ranges[beams]
     return np.stack([sx + rv * np.cos(a), sy + rv * np.sin(a)], axis=1)
 
 
@@ -205,6 +215,15 @@ class StaticClearance:
         return out
 
 
+def _near(points: np.ndarray, refs: np.ndarray, gap: float) -> np.ndarray:
+    """(M,) bool: each of points (M, 2) [m] lies within ``gap`` [m] of one of refs (K, 2)."""
+    near = np.zeros(len(points), dtype=bool)
+    for chunk in range(0, len(refs), 256):  # (M, 256) distances at a time
+        d2 = np.sum((points[:, None, :] - refs[None, chunk:chunk + 256, :]) ** 2, axis=-1)
+        near |= d2.min(axis=1) <= gap * gap
+    return near
+
+
 class LocalWorld:
     """The static map, its cost J and the scans: :meth:`add_scan` updates the rolling window and
     the latest unmapped scan points with their velocities (:attr:`seen`, one object replaced
@@ -218,11 +237,23 @@ class LocalWorld:
         config: the window's LocalCostmapConfig.
         offset: the sensor's (x, y, yaw) on base_link.
         tracker: the MotionTracker settings for the unmapped points' velocities.
+        mark_moving: returns on moving obstacles mark the window too. False (the default):
+            they only clear their rays, and the collision monitor alone judges them by their
+            predicted motion. Marked, a cylinder shuttling across a corridor is a wall there in
+            J: the plan through it is "blocked" at every crossing, the planner detours, and
+            with a second crosser on the detour the robot shuttled between the two routes for
+            the whole episode (maze2d-large, docs/RESULTS.md). A return within
+            ``MOVER_GAP`` of a moving one of the last ``MOVER_MEMORY`` s counts as moving too,
+            so a mover is not marked during the scan or two in which it turns round and its
+            velocity estimate passes through zero; so does a known return (on the map's
+            walls) within MOVER_GAP of a moving one. Marks within MOVER_GAP of a moving return
+            are removed: those a mover left in the first scans, before the tracker had an
+            earlier scan to measure its motion against (0.3 s).
     """
 
     def __init__(self, grid: GridMap, cost, config: LocalCostmapConfig | None = None, *,
                  offset=(0.0, 0.0, 0.0), min_fuse_interval: float = 0.2,
-                 tracker: TrackerConfig | None = None) -> None:
+                 tracker: TrackerConfig | None = None, mark_moving: bool = False) -> None:
         self.grid, self.cost = grid, cost
         self.window = LocalCostmap.for_map(grid, config)
         self.offset = tuple(float(v) for v in offset)
@@ -234,19 +265,37 @@ class LocalWorld:
         self._dirty = False
         self._fused_at = -math.inf
         self.fuse_ms = 0.0  # [ms] the last fusion's wall time
+        self.mark_moving = bool(mark_moving)
+        self._movers: deque[tuple[float, np.ndarray]] = deque()  # (stamp, (K, 2) moving points)
 
     def add_scan(self, pose, scan: Scan) -> None:
         """A scan taken at ``pose`` (x, y, yaw) of base_link."""
         before = self.window.obstacle_mask().copy()
+        beams = valid_beams(scan)  # (M,) indices of the returns
+        every = scan_points(pose, scan, self.offset)  # (M, 2)
+        # returns from the static map's obstacles are known: the planner and the exact checker
+        # keep the footprint off them; the collision monitor guards against the rest
+        unmapped = ~self.window.is_known(every)
+        points = every[unmapped]
+        velocities = self.tracker.update(points, scan.stamp)  # (M', 2)
+        mark = None
+        if not self.mark_moving:
+            moving = self._moving(points, velocities, scan.stamp)  # (M',)
+            # a known return beside a mover (one touching a wall) is not marked either: its
+            # mark lands a little beyond the return, possibly off the known cells
+            skip = np.zeros(len(every), dtype=bool)
+            skip[unmapped] = moving
+            if moving.any() and not unmapped.all():
+                skip[~unmapped] = _near(every[~unmapped], points[moving], MOVER_GAP)
+            mark = np.ones(len(scan.ranges), dtype=bool)
+            mark[beams[skip]] = False
         self.window.update(pose, scan.ranges, angle_min=scan.angle_min,
                            angle_increment=scan.angle_increment, range_min=scan.range_min,
                            range_max=scan.range_max, stamp=scan.stamp,
-                           sensor_offset=self.offset)
-        points = scan_points(pose, scan, self.offset)
-        # returns from the static map's obstacles are known: the planner and the exact checker
-        # keep the footprint off them; the collision monitor guards against the rest
-        points = points[~self.window.is_known(points)]
-        self.seen = SeenObstacles(points, self.tracker.update(points, scan.stamp), scan.stamp)
+                           sensor_offset=self.offset, mark=mark)
+        if mark is not None and moving.any():  # marks it left before its motion was known
+            self.window.forget(points[moving], MOVER_GAP)
+        self.seen = SeenObstacles(points, velocities, scan.stamp)
         mask = self.window.obstacle_mask()
         if before.shape != mask.shape or not np.array_equal(before, mask) \
                 or self.window.origin != self._window_origin:
@@ -254,6 +303,19 @@ class LocalWorld:
         self._window_origin = self.window.origin
 
     _window_origin: tuple[float, float] | None = None
+
+    def _moving(self, points: np.ndarray, velocities: np.ndarray, stamp: float) -> np.ndarray:
+        """(M,) bool: the unmapped returns (M, 2) [m] that move ((M, 2) [m/s] velocities
+        not 0) or lie within MOVER_GAP of a return that moved in the last MOVER_MEMORY s."""
+        while self._movers and (self._movers[0][0] < stamp - MOVER_MEMORY
+                                or self._movers[0][0] > stamp):  # old, or the clock went back
+            self._movers.popleft()
+        moving = np.any(velocities != 0.0, axis=1)  # (M,)
+        if self._movers and len(points):
+            moving |= _near(points, np.concatenate([p for _, p in self._movers]), MOVER_GAP)
+        if moving.any():
+            self._movers.append((float(stamp), points[np.any(velocities != 0.0, axis=1)]))
+        return moving
 
     def depths(self, poses, footprint) -> np.ndarray:
         """:meth:`StaticClearance.depths` on the static map: the collision monitor's check of

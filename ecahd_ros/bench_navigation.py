@@ -90,6 +90,7 @@ class NavigationBenchSettings:
     domain_id: int | None = None  # the first variant's; the others count up. None: from the pid
     obstacles: int = 0  # static boxes per episode (not on the map)
     moving: int = 0  # moving cylinders per episode
+    first_episode: int = 0  # the seeded episode to start at (ecahd demo's first_episode)
 
 
 @dataclass
@@ -168,7 +169,7 @@ def run_navigation_benchmark(settings: NavigationBenchSettings, out: Path, *,
                             realtime_factor=settings.realtime_factor,
                             max_steps=settings.max_steps, hold_steps=settings.hold_steps,
                             domain_id=base + i, obstacles=settings.obstacles,
-                            moving=settings.moving,
+                            moving=settings.moving, first_episode=settings.first_episode,
                             planner_params=dict(variant.planner_params),
                             refiner_params=dict(variant.refiner_params))
         t0 = time.monotonic()
@@ -271,7 +272,9 @@ def format_markdown(result: NavigationBenchResult) -> str:
     m = c.get("machine", {})
     return (
         f"Closed loop on {s.map}, robot {s.robot}, {s.episodes} seeded "
-        f"episode{'s' if s.episodes != 1 else ''} (seed {s.seed}), the same goals for every "
+        f"episode{'s' if s.episodes != 1 else ''} (seed {s.seed}"
+        f"{f', from episode {s.first_episode}' if s.first_episode else ''}), the same goals "
+        f"for every "
         f"variant; sim_bridge at {c['sim_rate_hz']:g} "
         f"steps per sim second, realtime factor {s.realtime_factor:g}; local_refiner control "
         f"every {c['control_period_s']:g} s of sim time ({c['control_rate_hz']:g} Hz), "
@@ -295,6 +298,8 @@ def command_line(settings: NavigationBenchSettings) -> str:
         argv += ["--obstacles", str(settings.obstacles)]
     if settings.moving:
         argv += ["--moving", str(settings.moving)]
+    if settings.first_episode:
+        argv += ["--first-episode", str(settings.first_episode)]
     default = OBSTACLE_VARIANTS if settings.obstacles or settings.moving else d.variants
     if tuple(settings.variants) != tuple(default):
         argv += ["--variants", *settings.variants]
@@ -388,7 +393,7 @@ def run(args: argparse.Namespace) -> int:
         variants=tuple(k for k in VARIANT_KEYS if k in chosen),
         realtime_factor=args.realtime_factor, max_steps=args.max_steps,
         hold_steps=args.hold_steps, domain_id=args.domain_id, obstacles=args.obstacles,
-        moving=args.moving)
+        moving=args.moving, first_episode=args.first_episode)
     out = (Path(args.out) if args.out
            else Path("runs") / time.strftime("bench-navigation-%Y%m%d-%H%M%S"))
     result = run_navigation_benchmark(settings, out, progress=not args.no_progress)

@@ -60,6 +60,8 @@ class DemoConfig:
 
     out: Path
     episodes: int = 3
+    first_episode: int = 0  # run the seeded episodes first_episode .. + episodes - 1 (start:
+    #   the goal before the first one; its obstacles: the same seed as in a full run)
     robot: str = "circle"
     map: str = "maze2d-large"
     seed: int = 0
@@ -85,15 +87,19 @@ class DemoConfig:
     def __post_init__(self) -> None:
         from ecahd_core.errors import EcahdError
 
-        if self.episodes < 1 or self.max_steps < 1 or self.hold_steps < 0:
-            raise EcahdError("demo needs episodes >= 1, max_steps >= 1 and hold_steps >= 0")
+        if self.episodes < 1 or self.max_steps < 1 or self.hold_steps < 0 \
+                or self.first_episode < 0:
+            raise EcahdError("demo needs episodes >= 1, first_episode >= 0, max_steps >= 1 and "
+                             "hold_steps >= 0")
         if not (math.isfinite(self.realtime_factor) and self.realtime_factor > 0):
             raise EcahdError(f"realtime_factor must be a finite number > 0 (planning runs "
                              f"concurrently: there is no lock-step), got {self.realtime_factor}")
         if self.obstacles < 0 or self.moving < 0:
             raise EcahdError("obstacles and moving must be >= 0")
-        if self.goals is not None and len(self.goals) < self.episodes:
-            raise EcahdError(f"{self.episodes} episodes need as many goals, got {self.goals}")
+        if self.goals is not None and len(self.goals) < self.first_episode + self.episodes:
+            last = self.first_episode + self.episodes - 1
+            raise EcahdError(f"episodes {self.first_episode}..{last} need {last + 1} goals, "
+                             f"got {self.goals}")
 
 
 @dataclass(frozen=True)
@@ -141,6 +147,9 @@ def add_obstacle_arguments(p: argparse.ArgumentParser) -> None:
                         "stays reachable for the footprint)")
     p.add_argument("--moving", type=int, default=0,
                    help="moving cylinders crossing each episode's route")
+    p.add_argument("--first-episode", type=int, default=0, metavar="I",
+                   help="start at seeded episode I (its start: goal I-1, its obstacles as in a "
+                        "run from episode 0): rerun one episode of a long run alone")
 
 
 def _node_parameters(config: DemoConfig, start) -> dict[str, dict]:
@@ -235,19 +244,25 @@ def _set_parameter(executor, client, name: str, value, spin, timeout: float = 10
 
 
 def _goals(config: DemoConfig):
-    """(start (2,), [goal (2,), ...]) from the config or seeded problems on the map."""
+    """(start (2,), [goal (2,), ...]) from the config or seeded problems on the map: episodes
+    first_episode .. first_episode + episodes - 1; the start is the goal before the first one
+    (as in a full run that reached it) unless given."""
     import numpy as np
 
     from ecahd_core.maps import load_map
     from ecahd_core.problems import make_problems
 
+    first, end = config.first_episode, config.first_episode + config.episodes
     if config.goals is not None:
-        goals = [np.asarray(g, dtype=np.float64) for g in config.goals[:config.episodes]]
-        start = np.asarray(config.start if config.start is not None else (1.5, 1.5))
-        return start, goals
-    problems = make_problems(load_map(config.map), config.episodes, seed=config.seed)
-    start = np.asarray(config.start) if config.start is not None else problems[0].start
-    return start, [p.goal for p in problems]
+        every = [np.asarray(g, dtype=np.float64) for g in config.goals[:end]]
+        start = (1.5, 1.5) if first == 0 else every[first - 1]
+    else:
+        problems = make_problems(load_map(config.map), end, seed=config.seed)
+        every = [p.goal for p in problems]
+        start = problems[0].start if first == 0 else every[first - 1]
+    if config.start is not None:
+        start = config.start
+    return np.asarray(start, dtype=np.float64), every[first:]
 
 
 def _scenarios(config: DemoConfig, start, goals) -> list[Path] | None:
@@ -267,14 +282,15 @@ def _scenarios(config: DemoConfig, start, goals) -> list[Path] | None:
         try:
             scenario = generate_scenario(grid, footprint, [previous, goal],
                                          static=config.obstacles, moving=config.moving,
-                                         seed=config.seed * 1000 + i, strict=False)
+                                         seed=config.seed * 1000 + config.first_episode + i,
+                                         strict=False)
             obstacles = scenario.obstacles
             log.info("episode %d: %d of %d obstacles placed: %s", i, len(obstacles),
                      config.obstacles + config.moving, ", ".join(scenario.kinds) or "none")
         except ScenarioError as exc:  # e.g. a leg too short to hold them: none this episode
             obstacles = ()
             log.warning("episode %d: no obstacles (%s)", i, exc)
-        files.append(write_scenario(folder / f"episode_{i}.yaml", obstacles))
+        files.append(write_scenario(folder / f"episode_{i}.yaml", obstacles))  # i: of this run
         previous = goal
     return files
 
@@ -460,7 +476,7 @@ def run(args: argparse.Namespace) -> int:
                         seed=args.seed, realtime_factor=args.realtime_factor,
                         max_steps=args.max_steps, hold_steps=args.hold_steps,
                         domain_id=args.domain_id, obstacles=args.obstacles,
-                        moving=args.moving,
+                        moving=args.moving, first_episode=args.first_episode,
                         models=Path(args.models) if args.models else None,
                         planner_params={"method": args.method},
                         refiner_params={"dd_enabled": not args.no_dd})

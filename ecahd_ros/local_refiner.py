@@ -124,6 +124,11 @@ PARAMETERS = [
     ParamSpec("obstacle_persistence", 2.0, "[s] a scanned obstacle not seen again for this long "
                                            "is forgotten; 0 = until a ray clears it"),
     ParamSpec("local_costmap_rate", 2.0, "[Hz] publishing rate of 'local_costmap'"),
+    ParamSpec("mark_moving_obstacles", False, "returns on obstacles the tracker sees moving "
+                                              "mark the local costmap too (false: they only "
+                                              "clear, and the collision monitor judges them "
+                                              "by their predicted motion, so a person crossing "
+                                              "a corridor does not block the plan through it)"),
     *shared("scan_offset_x", "scan_offset_y", "scan_offset_yaw"),
     ParamSpec("collision_monitor", True, "stop / slow down any cmd_vel whose footprint, swept "
                                          "over monitor_time_to_collision, hits a scan point "
@@ -183,6 +188,7 @@ class LocalRefinerParams:
     local_costmap_size: float
     obstacle_persistence: float
     local_costmap_rate: float
+    mark_moving_obstacles: bool
     scan_offset_x: float
     scan_offset_y: float
     scan_offset_yaw: float
@@ -417,7 +423,8 @@ class LocalRefiner(Node):
         if p.use_scan:
             from ecahd_core.sensing import LocalWorld
 
-            world = LocalWorld(grid, cost, p.local_costmap_config(), offset=p.scan_offset)
+            world = LocalWorld(grid, cost, p.local_costmap_config(), offset=p.scan_offset,
+                               mark_moving=p.mark_moving_obstacles)
         with self._lock, self._world_lock:
             self.grid, self.planner, self.refiner, self.world = grid, planner, refiner, world
             self.runner.refine = refiner

@@ -35,3 +35,28 @@ def spin_until(executor, condition, timeout: float = 10.0, what: str = "conditio
     while not condition():
         assert time.monotonic() < deadline, f"not within {timeout:g} s: {what}"
         executor.spin_once(timeout_sec=0.01)
+
+
+def ray_cast(sensor, angles, circles=(), boxes=()):
+    """Ranges (N,) [m] of rays from ``sensor`` (2,) at world ``angles`` (N,) [rad] against
+    circles (cx, cy, r) and axis-aligned boxes (xmin, ymin, xmax, ymax), analytically; +inf
+    where a ray hits nothing."""
+    import numpy as np
+
+    sensor = np.asarray(sensor, dtype=float)
+    d = np.stack([np.cos(angles), np.sin(angles)], 1)  # (N, 2)
+    r = np.full(len(angles), np.inf)
+    for cx, cy, rad in circles:
+        oc = sensor - np.array([cx, cy])
+        b = d @ oc
+        disc = b * b - (oc @ oc - rad * rad)
+        t = -b - np.sqrt(np.maximum(disc, 0.0))  # nearest intersection along the ray
+        r = np.where((disc >= 0) & (t > 0), np.minimum(r, t), r)
+    for x0, y0, x1, y1 in boxes:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tx = np.stack([(x0 - sensor[0]) / d[:, 0], (x1 - sensor[0]) / d[:, 0]])
+            ty = np.stack([(y0 - sensor[1]) / d[:, 1], (y1 - sensor[1]) / d[:, 1]])
+        tmin = np.maximum(tx.min(0), ty.min(0))  # slab method
+        tmax = np.minimum(tx.max(0), ty.max(0))
+        r = np.where((tmax >= tmin) & (tmin > 0), np.minimum(r, tmin), r)
+    return r

@@ -53,3 +53,21 @@ def test_short_demo_records_every_topic_and_eval_bag_scores_it(tmp_path):
                 "reached"):
         assert key in data["mean"] and key in data["episodes"][0]
     assert data["episodes"][0]["episode_reward"] == episode["episode_reward"]
+
+
+def test_first_episode_reruns_one_episode_of_a_seeded_run_alone(tmp_path):
+    """Episode i alone: the goals and obstacles it had in the full run, starting at goal i-1."""
+    from ecahd_ros.demo import _goals, _scenarios
+
+    full = DemoConfig(out=tmp_path / "full", episodes=4, seed=2, obstacles=1, moving=1)
+    alone = DemoConfig(out=tmp_path / "alone", episodes=1, seed=2, obstacles=1, moving=1,
+                       first_episode=3)
+    start_full, goals_full = _goals(full)
+    start, goals = _goals(alone)
+    assert len(goals) == 1 and goals[0].tolist() == goals_full[3].tolist()
+    assert start.tolist() == goals_full[2].tolist() != start_full.tolist()
+    files_full = _scenarios(full, start_full, goals_full)
+    files = _scenarios(alone, start, goals)
+    assert files[0].read_text() == files_full[3].read_text()
+    with pytest.raises(Exception, match="first_episode"):
+        DemoConfig(out=tmp_path / "x", first_episode=-1)

@@ -8,6 +8,7 @@ import pytest
 
 from ecahd_core.errors import EcahdError
 from ecahd_core.tracking import MotionTracker, TrackerConfig, align, clusters
+from conftest import ray_cast
 
 ANGLES = np.linspace(-np.pi, np.pi, 360, endpoint=False)
 
@@ -17,20 +18,7 @@ def cast(sensor, circles=(), boxes=(), noise=0.0, rng=None) -> np.ndarray:
     (cx, cy, r) and boxes (xmin, ymin, xmax, ymax), in beam order; ranges + N(0, noise)."""
     sensor = np.asarray(sensor, dtype=float)
     d = np.stack([np.cos(ANGLES), np.sin(ANGLES)], 1)  # (N, 2)
-    r = np.full(len(ANGLES), np.inf)
-    for cx, cy, rad in circles:
-        oc = sensor - np.array([cx, cy])
-        b = d @ oc
-        disc = b * b - (oc @ oc - rad * rad)
-        t = -b - np.sqrt(np.maximum(disc, 0.0))  # nearest intersection along the ray
-        r = np.where((disc >= 0) & (t > 0), np.minimum(r, t), r)
-    for x0, y0, x1, y1 in boxes:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            tx = np.stack([(x0 - sensor[0]) / d[:, 0], (x1 - sensor[0]) / d[:, 0]])
-            ty = np.stack([(y0 - sensor[1]) / d[:, 1], (y1 - sensor[1]) / d[:, 1]])
-        tmin = np.maximum(tx.min(0), ty.min(0))  # slab method
-        tmax = np.minimum(tx.max(0), ty.max(0))
-        r = np.where((tmax >= tmin) & (tmin > 0), np.minimum(r, tmin), r)
+    r = ray_cast(sensor, ANGLES, circles, boxes)
     if noise:
         r = r + rng.normal(0.0, noise, r.shape)
     ok = np.isfinite(r)
