@@ -64,6 +64,29 @@ _OWNER = "collision monitor"
 _STRAIGHT_W = 1e-9  # [rad/s] below this |w| the motion is integrated as a straight line
 
 
+def predicted_offsets(vel: np.ndarray, bounds: np.ndarray | None, t: np.ndarray) -> np.ndarray:
+    """(T, M, 2) [m] where each point will have moved at times t (T,) [s]: v t, or for a
+    point with finite bounds (M, 2) [m] (behind <= 0 <= ahead, along its motion) v t folded
+    back and forth into [behind, ahead] (a triangle wave at |v|). vel: (M, 2) [m/s]."""
+    disp = t[:, None, None] * vel[None, :, :]  # (T, M, 2)
+    if bounds is None:
+        return disp
+    fold = np.isfinite(bounds).all(axis=1) & vel.any(axis=1)  # (M,)
+    if not fold.any():
+        return disp
+    v = vel[fold]  # (m, 2)
+    speed = np.hypot(v[:, 0], v[:, 1])  # (m,)
+    lo, hi = np.minimum(bounds[fold, 0], 0.0), np.maximum(bounds[fold, 1], 0.0)  # (m,)
+    length = hi - lo  # (m,) [m]
+    x = speed[None, :] * t[:, None] - lo[None, :]  # (T, m) [m] from the rear end
+    period = np.maximum(2.0 * length, 1e-9)[None, :]
+    m = np.mod(x, period)
+    s = lo[None, :] + np.where(m <= length[None, :], m, period - m)  # (T, m) offset along v
+    s = np.where(length[None, :] > 0, s, 0.0)
+    disp[:, fold, :] = s[..., None] * (v / speed[:, None])[None, :, :]
+    return disp
+
+
 @dataclass(frozen=True, kw_only=True)
 class CollisionMonitorConfig:
     """Settings of the collision monitor (one place defines each default).
@@ -196,7 +219,7 @@ class CollisionMonitor:
 
     # ------------------------------------------------------------------------------ filter
     def filter(self, pose, v: float, w: float, points, points_stamp: float | None,
-               now: float, *, velocities=None, depths=None) -> MonitorResult:
+               now: float, *, velocities=None, bounds=None, depths=None) -> MonitorResult:
         """Filter one velocity command.
 
         Args:
@@ -207,6 +230,13 @@ class CollisionMonitor:
                 :meth:`LocalCostmap.points`; rows with NaN are ignored.
             points_stamp: [s] time the points were measured; None = no data yet.
             now: [s] the current time.
+            bounds: (M, 2) [m] or None: where each moving point turns round, as offsets
+                (behind <= 0 <= ahead) along its motion (:func:`~ecahd_core.sensing.
+                shuttle_bounds`; +-inf: never). A point with finite bounds (a mover seen going
+                back and forth) is predicted folded into that stretch, and the command is
+                stopped if it meets it within ``yield_horizon``, not only within
+                time_to_collision: the robot does not start across a mover's beat that the
+                mover will sweep again before the robot is through.
             velocities: (M, 2) [m/s] each point's velocity (:class:`MotionTracker`); None:
                 every point is static.
             depths: callable (N, 3) poses -> (N,) overlap depth [m] of the footprint with the
@@ -218,7 +248,8 @@ class CollisionMonitor:
         Returns:
             MonitorResult with the command to send.
         """
-        result = self._filter_points(pose, v, w, points, points_stamp, now, velocities, depths)
+        result = self._filter_points(pose, v, w, points, points_stamp, now, velocities, bounds,
+                                     depths)
         if depths is None or self.config.static_horizon == 0 or \
                 result.action in ("stop", "yield") or \
                 self._static_ok(pose, result.v, result.w, depths):
@@ -239,7 +270,7 @@ class CollisionMonitor:
         return bool(np.all(d[1:] <= max(float(d[0]), DEFAULT_TOLERANCE)))
 
     def _filter_points(self, pose, v: float, w: float, points, points_stamp, now: float,
-                       velocities, depths) -> MonitorResult:
+                       velocities, bounds, depths) -> MonitorResult:
         """The stop / slowdown / yield rules against the scan points (module docstring)."""
         cfg = self.config
         pose = np.asarray(pose, dtype=np.float64).reshape(-1)
@@ -261,6 +292,12 @@ class CollisionMonitor:
             raise EcahdError(f"velocities must be (M, 2) like the points {pts.shape}, got "
                              f"{vel.shape}")
         ok = np.isfinite(pts).all(axis=1)
+        if bounds is not None:
+            bounds = np.asarray(bounds, dtype=np.float64).reshape(-1, 2)
+            if bounds.shape != pts.shape:
+                raise EcahdError(f"bounds must be (M, 2) like the points {pts.shape}, got "
+                                 f"{bounds.shape}")
+            bounds = np.where(np.isnan(bounds[ok]), [-np.inf, np.inf], bounds[ok])
         pts, vel = pts[ok], np.where(np.isfinite(vel[ok]), vel[ok], 0.0)
         speed = np.hypot(vel[:, 0], vel[:, 1])  # (M,)
         # keep only the points that can reach the footprint within the horizons
@@ -268,25 +305,36 @@ class CollisionMonitor:
         reach = self._reach_static + (abs(v) + speed) * horizon  # (M,)
         near = np.sum((pts - pose[:2]) ** 2, axis=1) <= reach * reach
         pts, vel = pts[near], vel[near]  # (M', 2)
+        if bounds is not None:
+            bounds = bounds[near]
+            if not np.isfinite(bounds).all(axis=1).any():
+                bounds = None
         if len(pts) < cfg.min_points:
             return MonitorResult(float(v), float(w), "none", math.inf, "no obstacle in reach")
         moving = bool(np.any(vel))
 
-        clearance = self._clearance(pose, v, w, pts, vel)  # (K+1, M') [m]
+        clearance = self._clearance(pose, v, w, pts, vel, bounds)  # (K+1, M') [m]
         stop_step = self._first_step(clearance, cfg.stop_margin)
-        if stop_step is not None:
-            ttc = float(self._t[stop_step])
-            reason = (f"{self._count(clearance[stop_step], cfg.stop_margin)} point(s) within "
-                      f"{cfg.stop_margin} m of the footprint in {ttc:.2f} s")
+        beat = None if bounds is None or stop_step is not None or (v == 0.0 and w == 0.0) \
+            else self._beat_step(pose, v, w, pts, vel, bounds)
+        if stop_step is not None or beat is not None:
+            if stop_step is not None:
+                ttc = float(self._t[stop_step])
+                reason = (f"{self._count(clearance[stop_step], cfg.stop_margin)} point(s) "
+                          f"within {cfg.stop_margin} m of the footprint in {ttc:.2f} s")
+            else:
+                ttc = float(self._t_yield[beat])
+                reason = (f"a mover going back and forth comes within {cfg.stop_margin} m of "
+                          f"the footprint in {ttc:.2f} s: not starting across its beat")
             if moving:
-                escape = self._yield(pose, pts, vel, depths)
+                escape = self._yield(pose, pts, vel, bounds, depths)
                 if escape is not None:
                     return MonitorResult(escape[0], escape[1], "yield", ttc,
                                          f"{reason}; a moving obstacle would hit the stopped "
                                          f"robot: {escape[2]}")
             return MonitorResult(0.0, 0.0, "stop", ttc, reason)
         if moving and v == 0.0 and w == 0.0:  # a stopped robot: is something coming at it?
-            escape = self._yield(pose, pts, vel, depths)
+            escape = self._yield(pose, pts, vel, bounds, depths)
             if escape is not None:
                 return MonitorResult(escape[0], escape[1], "yield", math.inf,
                                      f"a moving obstacle would hit the stopped robot: "
@@ -309,13 +357,14 @@ class CollisionMonitor:
         step = (abs(v) + abs(w) * self.footprint.circumscribed_radius) * cfg.sim_dt  # [m]
         # (a moving point is where it is at a time, not on the arc: every one is re-checked)
         candidates = (clearance.min(axis=0) <= cfg.stop_margin + step) | ~still  # (M',)
-        slowed = self._clearance(pose, v_slow, w_slow, pts[candidates], vel[candidates])
+        slowed = self._clearance(pose, v_slow, w_slow, pts[candidates], vel[candidates],
+                                 None if bounds is None else bounds[candidates])
         restop = self._first_step(slowed, cfg.stop_margin)
         if restop is not None:
             reason = (f"the slowed command still comes within {cfg.stop_margin} m in "
                       f"{float(self._t[restop]):.2f} s")
             if moving:
-                escape = self._yield(pose, pts, vel, depths)
+                escape = self._yield(pose, pts, vel, bounds, depths)
                 if escape is not None:
                     return MonitorResult(escape[0], escape[1], "yield", math.inf,
                                          f"{reason}; a moving obstacle would hit the stopped "
@@ -328,11 +377,22 @@ class CollisionMonitor:
                              + ("" if cfg.slowdown_limits is None else " of the limits"))
 
     # ------------------------------------------------------------------------------- yield
-    def _yield(self, pose: np.ndarray, pts: np.ndarray, vel: np.ndarray, depths
+    def _beat_step(self, pose: np.ndarray, v: float, w: float, pts: np.ndarray,
+                   vel: np.ndarray, bounds: np.ndarray) -> int | None:
+        """First step (of the yield horizon's) at which the command, held, meets a point that
+        goes back and forth (finite bounds), or None."""
+        shuttling = np.isfinite(bounds).all(axis=1) & vel.any(axis=1)  # (M,)
+        t = self._t_yield
+        clearance = self._clearance_at(self.simulate(pose, v, w, t), pts[shuttling],
+                                       vel[shuttling], t, bounds=bounds[shuttling])
+        return self._first_step(clearance, self.config.stop_margin)
+
+    def _yield(self, pose: np.ndarray, pts: np.ndarray, vel: np.ndarray, bounds, depths
                ) -> tuple[float, float, str] | None:
         """An escape command (v, w, why) when the stopped robot would be hit by a moving point
         within yield_horizon and a command does better; None: stopping is as good.
-        pts, vel: (M, 2) points [m] and velocities [m/s].
+        pts, vel: (M, 2) points [m] and velocities [m/s]; bounds: (M, 2) [m] or None (see
+        :meth:`filter`).
 
         Each escape command drives until just before its first pose that goes into the
         static map (``depths``; deeper than now when the robot already touches it) and waits
@@ -348,7 +408,7 @@ class CollisionMonitor:
         # point farther than a stop margin + 0.1 m from the circumscribed circle is "far"
         reach = self.footprint.circumscribed_radius + cfg.stop_margin + 0.1  # [m]
         standing = self._clearance_at(np.tile(pose, (len(t), 1)), pts, vel, t,
-                                      reach=reach)  # (Ky+1, M)
+                                      reach=reach, bounds=bounds)  # (Ky+1, M)
         stand_hit = self._first_step(standing, cfg.stop_margin)
         if stand_hit is None:
             return None
@@ -360,7 +420,8 @@ class CollisionMonitor:
                        dtype=np.float64)
         clear = (d[1:] <= max(float(d[0]), DEFAULT_TOLERANCE)).reshape(len(commands), -1)
         moving = vel.any(axis=1)  # (M,)
-        ahead = pts[moving] + t[-1] * vel[moving]  # (m, 2) [m] where the moving points will be
+        ahead = (pts + predicted_offsets(vel, bounds, t[-1:])[0])[moving]  # (m, 2) [m] where
+        #   the moving points will be
 
         def away(xy: np.ndarray) -> float:  # [m] from the nearest of them at the horizon
             return float(np.min(np.hypot(*(ahead - xy).T), initial=math.inf))
@@ -376,7 +437,8 @@ class CollisionMonitor:
         steps = np.minimum(np.arange(len(t))[None, :], stop_at[movable, None] - 1)
         driven = poses[movable[:, None], steps]  # (C', Ky+1, 3)
         clearance = self._clearance_at(driven.reshape(-1, 3), pts, vel, np.tile(t, len(movable)),
-                                       reach=reach).reshape(len(movable), len(t), -1)
+                                       reach=reach, bounds=bounds
+                                       ).reshape(len(movable), len(t), -1)
         for j, i in enumerate(movable):  # (C', Ky+1, M) ranked one by one
             key = self._escape_key(clearance[j], commands[i] == self._last_yield,
                                    away(driven[j, -1, :2]))
@@ -419,23 +481,25 @@ class CollisionMonitor:
         return np.stack([x, y, yaw], axis=-1)
 
     def _clearance(self, pose, v: float, w: float, pts: np.ndarray, vel: np.ndarray | None = None,
-                   t: np.ndarray | None = None) -> np.ndarray:
+                   bounds: np.ndarray | None = None, t: np.ndarray | None = None) -> np.ndarray:
         """(K+1, M) distance [m] from each point to the footprint at each simulated pose, 0
         inside it. For a polygon, ``inf`` where the point is farther than slowdown_margin from
         the circumscribed circle (too far to matter, not computed). pts: (M, 2) world points,
-        vel: (M, 2) [m/s] their velocities (None: static), t: (K+1,) [s] step times."""
+        vel: (M, 2) [m/s] their velocities (None: static), bounds: (M, 2) [m] where they turn
+        round (None: never), t: (K+1,) [s] step times."""
         t = self._t if t is None else t
-        return self._clearance_at(self.simulate(pose, v, w, t), pts, vel, t)
+        return self._clearance_at(self.simulate(pose, v, w, t), pts, vel, t, bounds=bounds)
 
     def _clearance_at(self, poses: np.ndarray, pts: np.ndarray, vel: np.ndarray | None,
-                      t: np.ndarray, reach: float | None = None) -> np.ndarray:
+                      t: np.ndarray, reach: float | None = None,
+                      bounds: np.ndarray | None = None) -> np.ndarray:
         """:meth:`_clearance` for given poses (K+1, 3) at step times t (K+1,) [s]. A moving
         point's clearance shrinks by ``prediction_growth`` t: where it will be is uncertain.
         For a polygon, points farther than ``reach`` [m] (default circumscribed radius +
         slowdown_margin) from a pose's centre are not computed (inf)."""
         moving = None if vel is None or not np.any(vel) else vel.any(axis=1)  # (M,)
         clearance = self._clearance_of(poses, pts, vel if moving is not None else None, t,
-                                       self._reach_static if reach is None else reach)
+                                       self._reach_static if reach is None else reach, bounds)
         if moving is not None and self.config.prediction_growth > 0:
             # (K+1, 1) [m]; capped at the stop horizon: beyond it the estimate only decides
             # whether to yield, and a growing margin there made the robot yield for minutes
@@ -445,13 +509,15 @@ class CollisionMonitor:
         return clearance
 
     def _clearance_of(self, poses: np.ndarray, pts: np.ndarray, vel: np.ndarray | None,
-                      t: np.ndarray, reach: float) -> np.ndarray:
+                      t: np.ndarray, reach: float, bounds: np.ndarray | None = None
+                      ) -> np.ndarray:
         c, s = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]  # (K+1, 1)
         dx = pts[None, :, 0] - poses[:, 0:1]  # (K+1, M)
         dy = pts[None, :, 1] - poses[:, 1:2]
-        if vel is not None:  # a moving point is at p + v t at step time t
-            dx = dx + t[:, None] * vel[None, :, 0]
-            dy = dy + t[:, None] * vel[None, :, 1]
+        if vel is not None:  # a moving point is at p + v t at step time t (folded: bounds)
+            disp = predicted_offsets(vel, bounds, t)  # (K+1, M, 2)
+            dx = dx + disp[..., 0]
+            dy = dy + disp[..., 1]
         if self.footprint.radius is not None:
             return np.maximum(np.hypot(dx, dy) - self.footprint.radius, 0.0)
         clearance = np.full(dx.shape, np.inf)

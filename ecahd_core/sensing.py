@@ -24,6 +24,8 @@ from ecahd_core.tracking import MotionTracker, TrackerConfig
 SCAN_MAX_BEAMS = 100_000  # a scan with more beams is rejected
 MOVER_MEMORY = 1.0  # [s] a return near one that moved this recently is not marked (LocalWorld)
 MOVER_GAP = 0.3  # [m] ... "near": the tracker's cluster gap
+SHUTTLE_MEMORY = 12.0  # [s] moving returns kept to find where a mover turns round
+SHUTTLE_POINTS = 16  # at most this many moving returns of a scan are kept for that
 
 
 @dataclass(frozen=True)
@@ -161,11 +163,15 @@ class SeenObstacles:
     Attributes:
         points: (M, 2) [m]; velocities: (M, 2) [m/s] (0: static or unknown);
         stamp: [s] the scan's time.
+        bounds: (M, 2) [m] or None: where a moving point will turn round, as offsets (behind
+            <= 0 <= ahead) along its direction of motion (-inf, inf: no turn known; see
+            :func:`shuttle_bounds`); None: none known for any point.
     """
 
     points: np.ndarray
     velocities: np.ndarray
     stamp: float
+    bounds: np.ndarray | None = None
 
 
 class StaticClearance:
@@ -213,6 +219,52 @@ class StaticClearance:
         out = np.zeros(len(xy))
         out[inside] = self._edt[rows[inside], cols[inside]]
         return out
+
+
+def shuttle_bounds(points: np.ndarray, velocities: np.ndarray, trail: np.ndarray,
+                   trail_velocities: np.ndarray, *, lateral: float = MOVER_GAP) -> np.ndarray:
+    """Where each moving point will turn round, from where movers were seen before: a cart or
+    a person going back and forth (issue 11's moving obstacles), whose turn a constant-velocity
+    prediction misses.
+
+    For a point p moving with velocity v, the trail points within ``lateral`` [m] of the line
+    p + s v/|v| are the same mover's earlier returns along its way. If one of them moved the
+    other way (velocity against v), the mover has turned round before: it shuttles over the
+    stretch those trail points cover, [min s, max s], and p is predicted to turn round at its
+    ends. Without such evidence the point keeps its straight-line prediction.
+
+    Args:
+        points, velocities: (M, 2) [m], [m/s] this scan's unmapped returns (velocity 0:
+            static or unknown; those get no bounds).
+        trail, trail_velocities: (K, 2) [m], [m/s] earlier moving returns (all moving).
+        lateral: [m] how far off the line of motion a trail point may lie.
+
+    Returns:
+        (M, 2) [m] (behind <= 0, ahead >= 0) offsets along each point's direction of motion;
+        (-inf, inf) where no turn is known.
+    """
+    out = np.tile([-np.inf, np.inf], (len(points), 1))
+    speed = np.hypot(velocities[:, 0], velocities[:, 1])  # (M,)
+    moving = np.flatnonzero(speed > 0)
+    if len(moving) == 0 or len(trail) == 0:
+        return out
+    u = velocities[moving] / speed[moving, None]  # (m, 2) unit directions
+    rel = trail[None, :, :] - points[moving, None, :]  # (m, K, 2)
+    s = np.einsum("mkd,md->mk", rel, u)  # (m, K) [m] along the motion
+    off = np.abs(rel[..., 0] * u[:, None, 1] - rel[..., 1] * u[:, None, 0])  # (m, K) lateral
+    along = np.einsum("kd,md->mk", trail_velocities, u)  # (m, K) [m/s] trail speed along u
+    trail_speed = np.hypot(trail_velocities[:, 0], trail_velocities[:, 1])  # (K,)
+    on = off <= lateral  # (m, K)
+    back = on & (along < -0.5 * trail_speed[None, :])  # moved the other way on this line
+    turned = back.any(axis=1)  # (m,)
+    if not turned.any():
+        return out
+    lo = np.where(on, s, np.inf).min(axis=1)  # (m,)
+    hi = np.where(on, s, -np.inf).max(axis=1)
+    rows = moving[turned]
+    out[rows, 0] = np.minimum(lo[turned], 0.0)
+    out[rows, 1] = np.maximum(hi[turned], 0.0)
+    return out
 
 
 def _near(points: np.ndarray, refs: np.ndarray, gap: float) -> np.ndarray:
@@ -267,6 +319,8 @@ class LocalWorld:
         self.fuse_ms = 0.0  # [ms] the last fusion's wall time
         self.mark_moving = bool(mark_moving)
         self._movers: deque[tuple[float, np.ndarray]] = deque()  # (stamp, (K, 2) moving points)
+        # (stamp, (K, 2) moving points, (K, 2) their velocities) of the last SHUTTLE_MEMORY s
+        self._trail: deque[tuple[float, np.ndarray, np.ndarray]] = deque()
 
     def add_scan(self, pose, scan: Scan) -> None:
         """A scan taken at ``pose`` (x, y, yaw) of base_link."""
@@ -295,7 +349,8 @@ class LocalWorld:
                            sensor_offset=self.offset, mark=mark)
         if mark is not None and moving.any():  # marks it left before its motion was known
             self.window.forget(points[moving], MOVER_GAP)
-        self.seen = SeenObstacles(points, velocities, scan.stamp)
+        self.seen = SeenObstacles(points, velocities, scan.stamp,
+                                  self._shuttles(points, velocities, scan.stamp))
         mask = self.window.obstacle_mask()
         if before.shape != mask.shape or not np.array_equal(before, mask) \
                 or self.window.origin != self._window_origin:
@@ -303,6 +358,27 @@ class LocalWorld:
         self._window_origin = self.window.origin
 
     _window_origin: tuple[float, float] | None = None
+
+    def _shuttles(self, points: np.ndarray, velocities: np.ndarray, stamp: float
+                  ) -> np.ndarray | None:
+        """:func:`shuttle_bounds` of this scan's unmapped returns against the moving returns
+        of the last SHUTTLE_MEMORY s; then this scan's moving returns join them. None when
+        nothing moves."""
+        while self._trail and (self._trail[0][0] < stamp - SHUTTLE_MEMORY
+                               or self._trail[0][0] > stamp):  # old, or the clock went back
+            self._trail.popleft()
+        moving = np.any(velocities != 0.0, axis=1)
+        bounds = None
+        if moving.any() and self._trail:
+            bounds = shuttle_bounds(points, velocities,
+                                    np.concatenate([p for _, p, _ in self._trail]),
+                                    np.concatenate([v for _, _, v in self._trail]))
+        if moving.any():
+            keep = np.flatnonzero(moving)
+            keep = keep[np.linspace(0, len(keep) - 1, min(len(keep), SHUTTLE_POINTS)
+                                    ).astype(np.int64)]
+            self._trail.append((float(stamp), points[keep], velocities[keep]))
+        return bounds
 
     def _moving(self, points: np.ndarray, velocities: np.ndarray, stamp: float) -> np.ndarray:
         """(M,) bool: the unmapped returns (M, 2) [m] that move ((M, 2) [m/s] velocities

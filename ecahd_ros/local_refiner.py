@@ -548,7 +548,7 @@ class LocalRefiner(Node):
         if self.monitor is not None and seen is not None and pose is not None:
             # the last line of defence, once scans flow
             guarded = self.monitor.filter(pose, v, w, seen.points, seen.stamp, now,
-                                          velocities=seen.velocities,
+                                          velocities=seen.velocities, bounds=seen.bounds,
                                           depths=partial(world.depths, footprint=self.judged))
             v, w, action = guarded.v, guarded.w, guarded.action
             if action != "none":

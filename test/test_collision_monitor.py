@@ -314,3 +314,44 @@ def test_a_command_into_the_static_map_turns_the_robot_on_the_spot_instead():
                           depths=wall).action == "none"
     deeper = monitor.filter(inside, 0.2, 0.0, np.zeros((0, 2)), 0.0, 0.0, depths=wall)
     assert (deeper.v, deeper.w) == (0.0, 0.0)
+
+
+def test_predicted_offsets_fold_a_shuttling_point_back_and_forth():
+    from ecahd_core.collision_monitor import predicted_offsets
+
+    vel = np.array([[0.5, 0.0], [0.0, -0.5], [0.5, 0.0]])
+    # point 0 turns 0.5 m ahead and 0.25 m behind; point 1 has no known turn; point 2 none
+    bounds = np.array([[-0.25, 0.5], [-np.inf, np.inf], [-np.inf, np.inf]])
+    t = np.array([0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0])
+    disp = predicted_offsets(vel, bounds, t)  # (T, 3, 2)
+    # 0 -> 0.25 -> 0.5 (turns) -> 0.25 -> 0 -> -0.25 (turns) -> 0: period 2 * 0.75 / 0.5 = 3 s
+    assert disp[:, 0, 0] == pytest.approx([0.0, 0.25, 0.5, 0.25, 0.0, -0.25, 0.0])
+    assert np.all(disp[:, 0, 1] == 0.0)
+    assert disp[:, 1, 1] == pytest.approx(-0.5 * t)  # straight on
+    assert disp[:, 2, 0] == pytest.approx(0.5 * t)
+    assert np.array_equal(predicted_offsets(vel, None, t), t[:, None, None] * vel[None])
+
+
+def test_a_robot_does_not_start_across_the_beat_of_a_cylinder_going_back_and_forth():
+    # a cylinder (r 0.2) shuttles across the robot's way 1.2 m ahead, between y = -0.9 and
+    # y = 0.9, at 0.5 m/s; now it is at y = 0.6 going away (+y). Straight on, it would never
+    # come back: the robot (r 0.4, +x at 0.5 m/s) goes. Known to turn round 0.3 m ahead, it is
+    # back in the robot's way in about 1.5 s, before the robot (in the way from ~1.2 s to
+    # ~3.2 s) is through: the robot waits. Standing, the robot is never touched: no yield.
+    pts = cylinder_arc(1.2, 0.6)
+    vel = np.tile([0.0, 0.5], (len(pts), 1))
+    monitor = yielding()
+    straight = monitor.filter(ORIGIN, 0.5, 0.0, pts, 0.0, 0.0, velocities=vel,
+                              depths=open_floor)
+    assert straight.action == "none"
+    # along +y: the centre (0.6) turns at 0.9 (0.3 m ahead) and at -0.9 (1.5 m behind)
+    bounds = np.tile([-1.5, 0.3], (len(pts), 1))
+    beat = monitor.filter(ORIGIN, 0.5, 0.0, pts, 0.0, 0.0, velocities=vel, bounds=bounds,
+                          depths=open_floor)
+    assert beat.action == "stop" and "back and forth" in beat.reason
+    assert 1.0 < beat.min_time_to_collision < 3.0
+    # standing still is allowed (nothing reaches the robot where it is)
+    assert monitor.filter(ORIGIN, 0.0, 0.0, pts, 0.0, 0.0, velocities=vel, bounds=bounds,
+                          depths=open_floor).action == "none"
+    with pytest.raises(EcahdError, match="bounds"):
+        monitor.filter(ORIGIN, 0.5, 0.0, pts, 0.0, 0.0, velocities=vel, bounds=bounds[:2])

@@ -383,7 +383,7 @@ def test_a_cylinder_crossing_the_corridor_is_not_a_wall_in_the_local_costmap(mar
     world = LocalWorld(grid, CollisionCost.build(grid, robot), mark_moving=mark_moving)
     angles = np.linspace(-np.pi, np.pi, 360, endpoint=False)
     box = (2.5, 1.0, 2.8, 1.3)  # below the wall block, leaving the corridor's lower part
-    cyl_cells, box_marked = [], []
+    cyl_cells, box_marked, turns = [], [], []
     for k in range(40):  # 4 s at 10 Hz: the cylinder turns round at y = 0.25 and y = 0.95
         t = 0.1 * k
         s = (0.3 * t) % 1.4
@@ -396,7 +396,18 @@ def test_a_cylinder_crossing_the_corridor_is_not_a_wall_in_the_local_costmap(mar
         cyl_cells.append(int(np.count_nonzero(np.hypot(pts[:, 0] - 3.7, pts[:, 1] - y) < 0.35)))
         box_marked.append(bool(np.any((np.abs(pts[:, 0] - 2.5) < 0.1)
                                       & (pts[:, 1] > 0.95) & (pts[:, 1] < 1.3))))
+        seen = world.seen
+        on_cyl = np.hypot(seen.points[:, 0] - 3.7, seen.points[:, 1] - y) < 0.25
+        bounds = seen.bounds[on_cyl] if seen.bounds is not None else None
+        # going down (-y): where its returns turn round, y - (bound ahead)
+        turns.append(None if bounds is None or not np.isfinite(bounds).all() else
+                     float(np.median(seen.points[on_cyl, 1] - bounds[:, 1])))
     assert all(box_marked)
+    # going up (before 2.33 s) it was never seen going the other way: no turn is known; once
+    # it comes back down, where it turns round is known: the stretch it went up (its returns
+    # face the sensor, so it reaches about y = 0.25 - 0.2 at the bottom end)
+    assert all(turn is None for turn in turns[:23])
+    assert all(turn is not None and -0.05 < turn < 0.3 for turn in turns[26:]), turns
     # the tracker needs a scan 0.3 s old before anything is known to move: the first scans
     # mark the cylinder, and those marks last their 2 s persistence (rays behind a cylinder
     # do not reach them); after that nothing is marked, also while it turns round at 2.33 s
