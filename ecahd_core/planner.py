@@ -428,6 +428,26 @@ class LocalStage:
     timings_ms: dict
 
 
+@dataclass(frozen=True)
+class LocalStages:
+    """The local stage of K segments (:meth:`HierarchicalPlanner.local_stages`).
+
+    Attributes:
+        plans: (K, P^l, 2) [m] float32, the local plans to follow.
+        c_before, c_after: (K,) c^l of the straight plans, and of ``plans``.
+        dd_used: (K,) bool, DD ran (c_before > c_th).
+        polished: (K,) bool, polishing ran on the plan (``joined``: moved it).
+        timings_ms: the batch's wall time of "j_check", "dd" and "polish".
+    """
+
+    plans: torch.Tensor
+    c_before: torch.Tensor
+    c_after: torch.Tensor
+    dd_used: torch.Tensor
+    polished: torch.Tensor
+    timings_ms: dict
+
+
 REPLAN_POLICIES = ("every_waypoint", "once")
 # every_waypoint with SparseConfig.max_spacing: iterations beyond P^g - 1 before the last one is
 # made to go straight to the goal
@@ -444,7 +464,8 @@ class HierarchicalPlanner:
         dense: DenseConfig.
         replan: "every_waypoint" (Algorithm 1: SD best-of-N again from each reached waypoint,
             horizon P^g - p; warm-started from the previous plan when
-            ``sparse.config.warm_fraction`` is set) or "once" (ours, faster: SD best-of-N once, then its remaining
+            ``sparse.config.warm_fraction`` is set; the local stages of all iterations then
+            run in one batch) or "once" (ours, faster: SD best-of-N once, then its remaining
             waypoints are the global plan of every later iteration; in a static known map the
             replanned distribution is the same, so this trades resampling for ~P^g times less SD
             work).
@@ -526,33 +547,78 @@ class HierarchicalPlanner:
 
     def local_stage(self, a: torch.Tensor, b: torch.Tensor, *, end_fixed: bool = True,
                     generator: torch.Generator | None = None) -> LocalStage:
-        """Algorithm 1 lines 13-18 for one segment, with our rules: the straight LocalPlan(a, b)
-        of P^l points, its collision cost c^l, DD when c^l > c_th (keep-better: DD's plan only
-        if J finds it no costlier), polishing while still above c_th (the start stays; the end
-        too when ``end_fixed``). a, b: (2,) [m] float32 -> LocalStage."""
-        P_l = self.dense.points
+        """:meth:`local_stages` for one segment. a, b: (2,) [m] float32 -> LocalStage."""
+        stages = self.local_stages(a[None], b[None], end_fixed=torch.tensor([end_fixed]),
+                                   generator=generator)
+        return LocalStage(plan=stages.plans[0], c_before=float(stages.c_before[0]),
+                          c_after=float(stages.c_after[0]), dd_used=bool(stages.dd_used[0]),
+                          polished=bool(stages.polished[0]), timings_ms=stages.timings_ms)
+
+    def local_stages(self, a: torch.Tensor, b: torch.Tensor, *, end_fixed: torch.Tensor,
+                     joined: bool = False, generator: torch.Generator | None = None
+                     ) -> LocalStages:
+        """Algorithm 1 lines 13-18 for K segments in one batch, with our rules: the straight
+        LocalPlan(a, b) of P^l points, its collision cost c^l, DD when c^l > c_th (all such
+        segments in one DD batch; keep-better: DD's plan only if J finds it no costlier),
+        polishing while still above c_th (the starts stay; an end too where ``end_fixed``).
+
+        Every segment's result is that of running it alone (J, DD and polishing treat the
+        batch's rows independently; DD's random draws come in another order).
+
+        Args:
+            a, b: (K, 2) [m] float32, the segments' starts t^g_p[0] and ends t^g_p[1].
+            end_fixed: (K,) bool.
+            joined: the segments are consecutive (b[k] == a[k + 1]) and are polished as one
+                path with only its start and (where ``end_fixed[-1]``) its end fixed, so the
+                points where they meet may move together (:meth:`plan`, both policies).
+            generator: DD's random numbers.
+
+        Returns:
+            LocalStages.
+        """
+        K, P_l = a.shape[0], self.dense.points
         times = {"j_check": 0.0, "dd": 0.0, "polish": 0.0}
-        local = a + torch.linspace(0.0, 1.0, P_l)[:, None] * (b - a)  # (P^l, 2)
+        frac = torch.linspace(0.0, 1.0, P_l)[None, :, None]
+        local = a[:, None] + frac * (b - a)[:, None]  # (K, P^l, 2) LocalPlan
         t0 = time.perf_counter()
-        c = c_after = float(self.local_cost(local[None], b[None])[0])
+        c = self.local_cost(local, b).float().cpu()  # (K,) line 14
         times["j_check"] = (time.perf_counter() - t0) * 1e3
-        used = self.dd is not None and c > self.dense.c_th  # line 15
-        if used:
+        c_after = c.clone()
+        used = (c > self.dense.c_th) if self.dd is not None else torch.zeros(K, dtype=torch.bool)
+        if used.any():  # line 15
             t0 = time.perf_counter()
-            seg, cost = self.refine(a[None], b[None], generator=generator)
-            if not (self.dense.keep_better and float(cost[0]) > c):
-                local, c_after = seg[0], float(cost[0])
+            idx = torch.nonzero(used).flatten()
+            seg, cost = self.refine(a[idx], b[idx], generator=generator)
+            if self.dense.keep_better:  # ours: DD never replaces a cheaper straight plan
+                better = cost <= c[idx]
+                idx, seg, cost = idx[better], seg[better], cost[better]
+            local[idx] = seg
+            c_after[idx] = cost
             times["dd"] = (time.perf_counter() - t0) * 1e3
-        moved = self.polishing and c_after > self.dense.c_th
-        if moved:
+        polished = torch.zeros(K, dtype=torch.bool)
+        rough = (c_after > self.dense.c_th) if self.polishing else polished
+        if rough.any():
             t0 = time.perf_counter()
-            fixed = torch.zeros(P_l, dtype=torch.bool)
-            fixed[0], fixed[-1] = True, end_fixed
-            seg, cost = self.polish(local[None], fixed)
-            local, c_after = seg[0], float(cost[0])
+            if joined:  # join, polish the whole path, split again
+                path = torch.cat([local[:1, 0], local[:, 1:].reshape(-1, 2)])[None]
+                fixed = torch.zeros(path.shape[1], dtype=torch.bool)
+                fixed[0], fixed[-1] = True, bool(end_fixed[-1])
+                path, _ = self.polish(path, fixed)
+                idx = torch.arange(K)[:, None] * (P_l - 1) + torch.arange(P_l)[None]
+                new = path[0][idx]  # (K, P^l, 2)
+                polished = (new - local).abs().amax(dim=(1, 2)) > 0
+                local = new
+                c_after = self.local_cost(local, local[:, -1]).float().cpu()
+            else:
+                idx = torch.nonzero(rough).flatten()
+                fixed = torch.zeros(len(idx), P_l, dtype=torch.bool)
+                fixed[:, 0] = True
+                fixed[:, -1] = end_fixed[idx]
+                local[idx], c_after[idx] = self.polish(local[idx], fixed)
+                polished = rough
             times["polish"] = (time.perf_counter() - t0) * 1e3
-        return LocalStage(plan=local, c_before=c, c_after=c_after, dd_used=used, polished=moved,
-                          timings_ms=times)
+        return LocalStages(plans=local, c_before=c, c_after=c_after, dd_used=used,
+                           polished=polished, timings_ms=times)
 
     def resample_segment(self, a: torch.Tensor, b: torch.Tensor, *, samples: int,
                          generator: torch.Generator | None = None
@@ -579,15 +645,20 @@ class HierarchicalPlanner:
         S = torch.as_tensor(np.asarray(start, dtype=np.float32))
         G = torch.as_tensor(np.asarray(goal, dtype=np.float32))
         t_total = time.perf_counter()
-        times = {"sd": 0.0, "j_check": 0.0, "dd": 0.0, "polish": 0.0}
-        global_plans, segments, dd_used, costs, polished = [], [], [], [], []
-        placed = 0
+        times = {"sd": 0.0}
+        global_plans, placed = [], 0
         if self.replan == "once":
             return self._plan_once(S, G, generator, t_total)
         # Algorithm 1 line 1: P^g - 1 iterations, the last one reaching G. With waypoint spacing
         # by distance (SparseConfig.max_spacing) a plan may have more waypoints than its
         # horizon: the iterations go on (horizon 2) until a plan is just (S, G), at most
         # MAX_EXTRA_ITERATIONS more, after which the last one goes straight to G.
+        # MoveAgent takes the agent to the end of the local plan, t^g_p[1] (DD inpaints it), so
+        # iteration p + 1's SD call needs only iteration p's SD plan: the SD calls run first,
+        # then every iteration's local stage (lines 13-18) in one batch, as for replan "once":
+        # J and DD give each segment what it would get alone, and polishing (ours) descends J
+        # over the joined path, start and goal fixed, so a waypoint near a wall may move (the
+        # SD calls after it start from where SD put it).
         p = 0
         while True:
             t0 = time.perf_counter()
@@ -598,84 +669,51 @@ class HierarchicalPlanner:
                                         densify=not forced)  # lines 2-12
             waypoints, placed = sparse.waypoints, placed + sparse.placed
             times["sd"] += (time.perf_counter() - t0) * 1e3
-            last = len(waypoints) == 2
-            wp = torch.as_tensor(waypoints, dtype=torch.float32)
-            stage = self.local_stage(wp[0], wp[1], end_fixed=last,
-                                     generator=generator)  # lines 13-18
-            for k, ms in stage.timings_ms.items():
-                times[k] += ms
-            local, c, c_after, used, moved = (stage.plan, stage.c_before, stage.c_after,
-                                              stage.dd_used, stage.polished)
             global_plans.append(waypoints)
-            segments.append(local.numpy().astype(np.float64))
-            dd_used.append(used)
-            polished.append(moved)
-            costs.append((c, c_after))
-            S = local[-1].clone()  # MoveAgent: the end of the local plan (t^g[1] unless polished)
+            S = torch.as_tensor(waypoints[1], dtype=torch.float32)  # MoveAgent
             p += 1
-            if last:
+            if len(waypoints) == 2:
                 break
-        traj = np.concatenate([segments[0]] + [s[1:] for s in segments[1:]])
-        times["total"] = (time.perf_counter() - t_total) * 1e3
-        return HierarchicalPlan(trajectory=traj, global_plans=global_plans, segments=segments,
-                                dd_segments=dd_used, local_costs=costs, timings_ms=times,
-                                polished=polished, placed=placed)
+        ends = torch.as_tensor(np.stack([w[:2] for w in global_plans]), dtype=torch.float32)
+        stages = self.local_stages(ends[:, 0], ends[:, 1],
+                                   end_fixed=torch.ones(p, dtype=torch.bool), joined=True,
+                                   generator=generator)  # lines 13-18
+        times.update(stages.timings_ms)
+        return self._result(global_plans, stages, times, t_total, placed)
 
     def _plan_once(self, S: torch.Tensor, G: torch.Tensor, generator, t_total: float
                    ) -> HierarchicalPlan:
         """Algorithm 1 with one SD plan: every iteration's local stage depends on that plan only,
-        so all straight local plans are checked by J in one batch and all segments above c_th are
-        refined by DD in one batch (the same results as iterating, P^g - 1 times fewer calls).
-        Polishing (when on and some local plan is still above c_th) descends J over the whole
-        joined path at once, start and goal fixed, so neighbouring segments stay joined."""
-        P_g, P_l = self.sparse.config.horizon, self.dense.points
-        times = {"sd": 0.0, "j_check": 0.0, "dd": 0.0, "polish": 0.0}
+        so all of them run in one batch (:meth:`local_stages`). Polishing (when on and some
+        local plan is still above c_th) descends J over the whole joined path at once, start
+        and goal fixed, so the waypoints where segments meet may move too."""
+        P_g = self.sparse.config.horizon
+        times = {"sd": 0.0}
         t0 = time.perf_counter()
         sparse = self.sparse.plan(S.numpy(), G.numpy(), horizon=P_g, generator=generator)
         waypoints = sparse.waypoints
         times["sd"] = (time.perf_counter() - t0) * 1e3
         wp = torch.as_tensor(waypoints, dtype=torch.float32)
-        a, b = wp[:-1], wp[1:]  # (P^g - 1, 2): t^g_p[0], t^g_p[1] of every iteration
-        frac = torch.linspace(0.0, 1.0, P_l)[None, :, None]
-        local = a[:, None] + frac * (b - a)[:, None]  # (P^g - 1, P^l, 2) LocalPlan
-        t0 = time.perf_counter()
-        c = self.local_cost(local, b).float().cpu()
-        times["j_check"] = (time.perf_counter() - t0) * 1e3
-        c_after = c.clone()
-        used = (c > self.dense.c_th) if self.dd is not None else torch.zeros_like(c, dtype=torch.bool)
-        if used.any():
-            t0 = time.perf_counter()
-            idx = torch.nonzero(used).flatten()
-            seg, cost = self.refine(a[idx], b[idx], generator=generator)
-            if self.dense.keep_better:  # ours: DD never replaces a cheaper straight plan
-                better = cost <= c[idx]
-                idx, seg, cost = idx[better], seg[better], cost[better]
-            local[idx] = seg
-            c_after[idx] = cost
-            times["dd"] = (time.perf_counter() - t0) * 1e3
-        polished = torch.zeros_like(used)
-        if self.polishing and bool((c_after > self.dense.c_th).any()):
-            t0 = time.perf_counter()
-            K = local.shape[0]  # join, polish the whole path, split again
-            joined = torch.cat([local[:1, 0], local[:, 1:].reshape(-1, 2)])[None]
-            fixed = torch.zeros(joined.shape[1], dtype=torch.bool)
-            fixed[0] = fixed[-1] = True
-            joined, _ = self.polish(joined, fixed)
-            idx = torch.arange(K)[:, None] * (P_l - 1) + torch.arange(P_l)[None]
-            new = joined[0][idx]  # (K, P^l, 2)
-            polished = (new - local).abs().amax(dim=(1, 2)) > 0
-            local = new
-            c_after = self.local_cost(local, local[:, -1]).float().cpu()
-            times["polish"] = (time.perf_counter() - t0) * 1e3
-        segments = [seg.numpy().astype(np.float64) for seg in local]
+        stages = self.local_stages(wp[:-1], wp[1:], end_fixed=torch.ones(len(wp) - 1,
+                                                                          dtype=torch.bool),
+                                   joined=True, generator=generator)
+        times.update(stages.timings_ms)
+        return self._result([waypoints[p:] for p in range(len(waypoints) - 1)], stages, times,
+                            t_total, sparse.placed)
+
+    @staticmethod
+    def _result(global_plans: list, stages: LocalStages, times: dict, t_total: float,
+                placed: int) -> HierarchicalPlan:
+        """The HierarchicalPlan of the iterations' SD plans and their local stages."""
+        segments = [seg.numpy().astype(np.float64) for seg in stages.plans]
         traj = np.concatenate([segments[0]] + [sg[1:] for sg in segments[1:]])
         times["total"] = (time.perf_counter() - t_total) * 1e3
-        return HierarchicalPlan(trajectory=traj,
-                                global_plans=[waypoints[p:] for p in range(len(waypoints) - 1)],
-                                segments=segments, dd_segments=used.tolist(),
-                                local_costs=list(zip(c.tolist(), c_after.tolist())),
-                                timings_ms=times, polished=polished.tolist(),
-                                placed=sparse.placed)
+        return HierarchicalPlan(trajectory=traj, global_plans=global_plans, segments=segments,
+                                dd_segments=stages.dd_used.tolist(),
+                                local_costs=list(zip(stages.c_before.tolist(),
+                                                     stages.c_after.tolist())),
+                                timings_ms=times, polished=stages.polished.tolist(),
+                                placed=placed)
 
 
 class FullDiffusion:

@@ -42,16 +42,18 @@ def test_dd_runs_only_above_threshold(c_th):
     calls = []
     original = planner.refine
 
-    def counting_refine(*a, **k):
-        calls.append(1)
-        return original(*a, **k)
+    def counting_refine(starts, *a, **k):
+        calls.append(len(starts))
+        return original(starts, *a, **k)
 
     planner.refine = counting_refine
     plan = planner.plan(np.array([1.5, 1.5]), np.array([6.5, 5.5]),
                         generator=torch.Generator().manual_seed(1))
     above = [c > c_th for c, _ in plan.local_costs]
     assert plan.dd_segments == above
-    assert len(calls) == sum(above) == plan.dd_calls
+    # every segment above c_th, and only those, refined in one DD batch after the SD calls
+    assert calls == ([sum(above)] if any(above) else [])
+    assert sum(above) == plan.dd_calls
     if c_th > 1e8:
         assert plan.dd_calls == 0
 
@@ -198,3 +200,38 @@ def test_algorithm1_with_max_spacing_reaches_the_goal_through_every_waypoint(rep
     for a, b in zip(plan.segments, plan.segments[1:]):
         assert np.allclose(a[-1], b[0])
     assert len(plan.global_plans) == len(plan.segments)
+
+
+def test_a_batch_of_local_stages_gives_each_segment_what_it_gets_alone():
+    # DD replaced by a deterministic stand-in (a detour through a wall for some segments), so
+    # the batch and the one-by-one runs can be compared exactly; polishing on, the last end free
+    fp = make_footprint("quadruped")
+    cc = CostConfig()
+    sd = SparseDiffusion(load_model("sd", GRID, footprint=fp), SparseConfig(num_candidates=4))
+    hd = HierarchicalPlanner(sd, load_model("dd", GRID, footprint=fp), costmap=cc.make_costmap(GRID),
+                             footprint_points=fp.points, cost_config=cc,
+                             dense=DenseConfig(c_th=0.0))
+
+    def fake_refine(starts, goals, **_):  # the straight plan bent 0.3 m sideways in the middle
+        frac = torch.linspace(0.0, 1.0, hd.dense.points)[None, :, None]
+        segs = starts[:, None] + frac * (goals - starts)[:, None]
+        segs[:, 1:-1, 1] += 0.3
+        return segs, hd.local_cost(segs, goals)
+
+    hd.refine = fake_refine
+    # maze2d-large: (1.5, 1.5) -> (2.5, 1.5) free, (3.5, 2.5) clips a wall, (1.5, 1.5) -> (1.5, 3.5)
+    a = torch.tensor([[1.5, 1.5], [2.5, 1.5], [1.5, 1.5], [3.5, 5.5]])
+    b = torch.tensor([[2.5, 1.5], [3.5, 2.5], [1.5, 3.5], [4.5, 5.5]])
+    end_fixed = torch.tensor([True, True, False, False])
+    batch = hd.local_stages(a, b, end_fixed=end_fixed)
+    assert batch.plans.shape == (4, hd.dense.points, 2)
+    assert batch.polished.any() and batch.dd_used.any()
+    for k in range(4):
+        alone = hd.local_stage(a[k], b[k], end_fixed=bool(end_fixed[k]))
+        assert torch.allclose(batch.plans[k], alone.plan, atol=1e-6)
+        assert float(batch.c_before[k]) == pytest.approx(alone.c_before, rel=1e-5, abs=1e-7)
+        assert float(batch.c_after[k]) == pytest.approx(alone.c_after, rel=1e-5, abs=1e-7)
+        assert (bool(batch.dd_used[k]), bool(batch.polished[k])) == (alone.dd_used, alone.polished)
+        assert torch.equal(batch.plans[k, 0], a[k])
+        if end_fixed[k]:
+            assert torch.equal(batch.plans[k, -1], b[k])
