@@ -117,6 +117,9 @@ def simplify(xy: np.ndarray, tolerance: float = SIMPLIFY_TOLERANCE) -> np.ndarra
 
 
 # ----------------------------------------------------------------------------- global stage
+MAX_STALL_DOUBLINGS = 3  # GlobalRunnerConfig.replan_timeout grows at most 8-fold
+
+
 @dataclass(frozen=True, kw_only=True)
 class GlobalRunnerConfig:
     """Settings of :class:`GlobalRunner` (units in brackets).
@@ -125,7 +128,11 @@ class GlobalRunnerConfig:
         horizon: P^g, waypoints of a goal's first plan.
         waypoint_tolerance: [m] reaching the next waypoint this close replans; the goal this
             close is reached.
-        replan_timeout: [s] no waypoint reached for this long replans; 0 = never.
+        replan_timeout: [s] no waypoint reached for this long replans; 0 = never. Each
+            further timeout replan with no waypoint reached in between doubles it (at most
+            2^MAX_STALL_DOUBLINGS times): on a slow or busy CPU a local stage that takes longer
+            than the timeout would otherwise be restarted by every replan, and the robot would
+            never move (seen on a 2-core machine at 4x real time).
         replan: "every_waypoint" (Algorithm 1) or "once" (one plan per goal).
         min_plan_interval: [s] goals closer in time than this are coalesced.
     """
@@ -177,6 +184,7 @@ class GlobalRunner:
         self._forced: str | None = None  # a replan asked for by the local stage
         self.blocked_count = 0  # "blocked" replans asked for since the goal arrived
         self._hold = False  # the current goal's plan is followed to the end (a fallback)
+        self.stalls = 0  # timeout replans since a waypoint was last reached
 
     @property
     def active(self) -> bool:
@@ -193,7 +201,7 @@ class GlobalRunner:
         if not np.all(np.isfinite(g)):
             raise PlanningError(f"goal is not finite: {g.tolist()}")
         self.goal, self.waypoints, self.iteration, self._pending = g, None, 0, True
-        self._forced, self.blocked_count, self._hold = None, 0, False
+        self._forced, self.blocked_count, self._hold, self.stalls = None, 0, False, 0
 
     def cancel(self) -> None:
         self.goal, self.waypoints, self._pending, self._forced = None, None, False, None
@@ -235,10 +243,13 @@ class GlobalRunner:
         if len(self.waypoints) > 2 and \
                 float(np.linalg.norm(xy - self.waypoints[1])) < c.waypoint_tolerance:
             self.iteration += 1  # MoveAgent reached t^g_p[1]: replan with P^g - p
+            self.stalls = 0
             return PlanRequest(xy, self.goal.copy(), max(2, c.horizon - self.iteration),
                                "waypoint")
-        if c.replan_timeout > 0 and now - self._last_plan > c.replan_timeout:
+        timeout = c.replan_timeout * 2 ** min(self.stalls, MAX_STALL_DOUBLINGS)
+        if c.replan_timeout > 0 and now - self._last_plan > timeout:
             self._last_plan = now  # one timeout replan per period even if planning fails
+            self.stalls += 1
             return PlanRequest(xy, self.goal.copy(), horizon, "timeout")
         return None
 

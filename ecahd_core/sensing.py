@@ -301,11 +301,14 @@ class LocalWorld:
             walls) within MOVER_GAP of a moving one. Marks within MOVER_GAP of a moving return
             are removed: those a mover left in the first scans, before the tracker had an
             earlier scan to measure its motion against (0.3 s).
+        shuttles: find where movers going back and forth turn round (:func:`shuttle_bounds`,
+            ``seen.bounds``); False: ``seen.bounds`` stays None.
     """
 
     def __init__(self, grid: GridMap, cost, config: LocalCostmapConfig | None = None, *,
                  offset=(0.0, 0.0, 0.0), min_fuse_interval: float = 0.2,
-                 tracker: TrackerConfig | None = None, mark_moving: bool = False) -> None:
+                 tracker: TrackerConfig | None = None, mark_moving: bool = False,
+                 shuttles: bool = False) -> None:
         self.grid, self.cost = grid, cost
         self.window = LocalCostmap.for_map(grid, config)
         self.offset = tuple(float(v) for v in offset)
@@ -318,6 +321,7 @@ class LocalWorld:
         self._fused_at = -math.inf
         self.fuse_ms = 0.0  # [ms] the last fusion's wall time
         self.mark_moving = bool(mark_moving)
+        self.shuttles = bool(shuttles)
         self._movers: deque[tuple[float, np.ndarray]] = deque()  # (stamp, (K, 2) moving points)
         # (stamp, (K, 2) moving points, (K, 2) their velocities) of the last SHUTTLE_MEMORY s
         self._trail: deque[tuple[float, np.ndarray, np.ndarray]] = deque()
@@ -350,7 +354,8 @@ class LocalWorld:
         if mark is not None and moving.any():  # marks it left before its motion was known
             self.window.forget(points[moving], MOVER_GAP)
         self.seen = SeenObstacles(points, velocities, scan.stamp,
-                                  self._shuttles(points, velocities, scan.stamp))
+                                  self._shuttles(points, velocities, scan.stamp)
+                                  if self.shuttles else None)
         mask = self.window.obstacle_mask()
         if before.shape != mask.shape or not np.array_equal(before, mask) \
                 or self.window.origin != self._window_origin:

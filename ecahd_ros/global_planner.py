@@ -39,6 +39,7 @@ Parameters (read-only, declared in :data:`PARAMETERS`):
         (sd); distance to the goal that ends it (all methods).
     replan (str, "every_waypoint"): sd: Algorithm 1's replanning at each waypoint, or "once".
     replan_timeout (double, 5.0): [s] no waypoint reached for this long replans (sd); 0 = never.
+        Doubles with each further such replan (at most 8x) until a waypoint is reached.
     seed (int, 0): seed of the sampler's torch.Generator (a seed reproduces a plan sequence).
     torch_threads (int, 1): torch.set_num_threads.
 A parameter out of range, an unknown robot or an unreadable model ends the node at start-up
@@ -73,8 +74,8 @@ from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ecahd_core.errors import EcahdError, PlanningError
-from ecahd_core.navigation import (REPLAN_POLICIES, SNAP_DISTANCE, GlobalRunner,
-                                   GlobalRunnerConfig, PlanRequest, validate_pose)
+from ecahd_core.navigation import (MAX_STALL_DOUBLINGS, REPLAN_POLICIES, SNAP_DISTANCE,
+                                   GlobalRunner, GlobalRunnerConfig, PlanRequest, validate_pose)
 from ecahd_core.planner import SELECTION_RULES, SparseConfig, SparseDiffusion, SparsePlan
 from ecahd_ros.conversions import msg_to_grid, timing_message, xy_to_path
 from ecahd_ros.params import (ParamSpec, declare_parameters, make_robot, read_parameters,
@@ -116,7 +117,9 @@ PARAMETERS = [
     ParamSpec("replan", "every_waypoint", f"sd: {list(REPLAN_POLICIES)} (every_waypoint: "
                                           "Algorithm 1; once: one SD plan per goal)"),
     ParamSpec("replan_timeout", 5.0, "[s] sd: with no waypoint reached for this long, replan "
-                                     "from the current pose (same horizon); 0 = never"),
+                                     "from the current pose (same horizon); doubles with each "
+                                     "further such replan (at most 8x) until a waypoint is "
+                                     "reached; 0 = never"),
     ParamSpec("obstacle_memory", 60.0, "[s] obstacles the local costmap found are avoided "
                                        "by re-plans for this long unless seen gone"),
     *shared("seed", "torch_threads"),
@@ -441,9 +444,11 @@ class GlobalPlanner(Node):
             self.get_logger().info(f"goal ({goal[0]:.2f}, {goal[1]:.2f}) reached")
         elif isinstance(event, PlanRequest):
             if event.reason == "timeout":
-                self.get_logger().warning("no waypoint reached for "
-                                          f"{self.params.replan_timeout:g} s: replanning from "
-                                          "the current pose")
+                stalls = self.runner.stalls
+                waited = self.params.replan_timeout * 2 ** min(stalls - 1, MAX_STALL_DOUBLINGS)
+                self.get_logger().warning(f"no waypoint reached for {waited:g} s: replanning "
+                                          f"from the current pose (timeout replan {stalls} in "
+                                          "a row)")
             self._plan(event)
 
     # ----------------------------------------------------------------------------- planning

@@ -149,6 +149,11 @@ PARAMETERS = [
                                                 "counts as this times min(t, "
                                                 "monitor_time_to_collision) closer (its "
                                                 "velocity is an estimate); 0 trusts it"),
+    ParamSpec("monitor_shuttles", False, "movers seen going back and forth are predicted "
+                                         "turning round at the ends of their stretch, and the "
+                                         "robot does not start across their beat within "
+                                         "monitor_yield_horizon (off: in the closed loop it "
+                                         "waited for crossers: 10 of 20 reached against 15)"),
     *shared("seed", "torch_threads"),
 ]
 POSE_HISTORY = 1.0  # [s] of odometry poses kept to place scans by their stamps
@@ -201,6 +206,7 @@ class LocalRefinerParams:
     monitor_yield: bool
     monitor_yield_horizon: float
     monitor_prediction_growth: float
+    monitor_shuttles: bool
     seed: int
     torch_threads: int
 
@@ -424,7 +430,8 @@ class LocalRefiner(Node):
             from ecahd_core.sensing import LocalWorld
 
             world = LocalWorld(grid, cost, p.local_costmap_config(), offset=p.scan_offset,
-                               mark_moving=p.mark_moving_obstacles)
+                               mark_moving=p.mark_moving_obstacles,
+                               shuttles=p.monitor_shuttles)
         with self._lock, self._world_lock:
             self.grid, self.planner, self.refiner, self.world = grid, planner, refiner, world
             self.runner.refine = refiner

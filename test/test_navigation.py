@@ -47,6 +47,28 @@ def test_replan_once_and_timeout():
     assert timed.step((0.2, 0.0), 2.2) is None  # once per period
 
 
+def test_timeout_replans_back_off_until_a_waypoint_is_reached():
+    # a local stage slower than the timeout (a busy CPU) must not be restarted for ever: each
+    # timeout replan with no waypoint reached in between doubles the timeout (2, 4, 8, 16, 16 s)
+    r = GlobalRunner(GlobalRunnerConfig(replan_timeout=2.0))
+    r.set_goal((2.0, 1.0))
+    r.accept(PLAN, 0.0) if isinstance(r.step((0.0, 0.0), 0.0), PlanRequest) else None
+    fired, t = [], 0.0
+    while t < 50.0:
+        t = round(t + 0.1, 1)
+        req = r.step((0.2, 0.0), t)
+        if isinstance(req, PlanRequest):
+            assert req.reason == "timeout"
+            fired.append(t)
+            r.accept(PLAN, t)
+    assert fired == [2.1, 6.2, 14.3, 30.4, 46.5]
+    req = r.step((0.95, 0.0), 47.0)  # a waypoint reached: back to 2 s
+    assert req.reason == "waypoint" and r.stalls == 0
+    r.accept(PLAN[1:], 47.0)
+    assert r.step((1.0, 0.3), 49.0) is None
+    assert r.step((1.0, 0.3), 49.1).reason == "timeout"
+
+
 def test_a_burst_of_goals_is_coalesced():
     r = GlobalRunner(GlobalRunnerConfig(min_plan_interval=0.05))
     requests = 0
@@ -306,7 +328,7 @@ def test_a_scanned_blockage_sends_the_detour_through_the_other_corridor():
     seen = world.seen
     assert seen.stamp == 0.0 and seen.velocities.shape == seen.points.shape
     assert len(seen.points) > 80 and np.allclose(seen.points[:, 0], 3.0, atol=1e-6)
-    assert not seen.velocities.any()
+    assert not seen.velocities.any() and seen.bounds is None  # no shuttle search asked for
     depths = world.depths(np.array([[2.0, 0.75, 0.0], [2.0, 1.2, 0.0]]), robot)
     assert depths[0] <= 0 < depths[1]  # the second overlaps the wall block above (y >= 1.5)
     # column x in [3.0, 3.1] blocked from y = 0 up to the wall block; the row next to the block
@@ -380,7 +402,8 @@ def test_a_cylinder_crossing_the_corridor_is_not_a_wall_in_the_local_costmap(mar
     from ecahd_core.sensing import LocalWorld, Scan
 
     grid, robot = two_corridor_map(), make_footprint("circle")
-    world = LocalWorld(grid, CollisionCost.build(grid, robot), mark_moving=mark_moving)
+    world = LocalWorld(grid, CollisionCost.build(grid, robot), mark_moving=mark_moving,
+                       shuttles=True)
     angles = np.linspace(-np.pi, np.pi, 360, endpoint=False)
     box = (2.5, 1.0, 2.8, 1.3)  # below the wall block, leaving the corridor's lower part
     cyl_cells, box_marked, turns = [], [], []
