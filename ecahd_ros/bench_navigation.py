@@ -91,6 +91,8 @@ class NavigationBenchSettings:
     obstacles: int = 0  # static boxes per episode (not on the map)
     moving: int = 0  # moving cylinders per episode
     first_episode: int = 0  # the seeded episode to start at (ecahd demo's first_episode)
+    # (node, parameter, value) set on every variant's node on top of its own (--set)
+    overrides: tuple[tuple[str, str, object], ...] = ()
 
 
 @dataclass
@@ -133,6 +135,39 @@ class NavigationBenchResult:
 
 
 # ----------------------------------------------------------------------------------- running
+OVERRIDABLE = ("global_planner", "local_refiner")  # nodes whose parameters --set may change
+
+
+def parse_override(text: str) -> tuple[str, str, object]:
+    """``NODE.PARAM=VALUE`` (``--set``) -> (node, parameter, value). VALUE is read as JSON
+    (``true``, ``3``, ``0.5``, ``"x"``) and taken as a string when it is not JSON; the node must
+    be one of OVERRIDABLE and declare the parameter. EcahdError names what is wrong."""
+    from ecahd_core.errors import EcahdError
+
+    key, sep, raw = text.partition("=")
+    node, dot, name = key.strip().partition(".")
+    if not sep or not dot or not name:
+        raise EcahdError(f"--set {text!r}: expected NODE.PARAM=VALUE, e.g. "
+                         "local_refiner.max_v=0.3")
+    if node not in OVERRIDABLE:
+        raise EcahdError(f"--set {text!r}: node {node!r} is not one of {list(OVERRIDABLE)}")
+    module = {"global_planner": "ecahd_ros.global_planner",
+              "local_refiner": "ecahd_ros.local_refiner"}[node]
+    import importlib
+
+    specs = {spec.name: spec for spec in importlib.import_module(module).PARAMETERS}
+    if name not in specs:
+        raise EcahdError(f"--set {text!r}: {node} has no parameter {name!r}")
+    try:
+        value = json.loads(raw)
+    except json.JSONDecodeError:
+        value = raw
+    if isinstance(specs[name].default, float) and isinstance(value, int) \
+            and not isinstance(value, bool):
+        value = float(value)  # a double parameter given as "1"
+    return node, name, value
+
+
 def control_context() -> dict:
     """The controller and simulator limits every variant runs with (the nodes' defaults)."""
     from ecahd_ros.local_refiner import PARAMETERS as REFINER
@@ -146,6 +181,10 @@ def control_context() -> dict:
             "max_accel": refiner["max_accel"], "sim_rate_hz": sim["rate_hz"],
             "sim_max_v": sim["max_v"], "sim_max_w": sim["max_w"],
             "control_timeout_s": sim["control_timeout"]}
+
+
+def _overrides(settings: NavigationBenchSettings, node: str) -> dict:
+    return {name: value for n, name, value in settings.overrides if n == node}
 
 
 def run_navigation_benchmark(settings: NavigationBenchSettings, out: Path, *,
@@ -170,8 +209,10 @@ def run_navigation_benchmark(settings: NavigationBenchSettings, out: Path, *,
                             max_steps=settings.max_steps, hold_steps=settings.hold_steps,
                             domain_id=base + i, obstacles=settings.obstacles,
                             moving=settings.moving, first_episode=settings.first_episode,
-                            planner_params=dict(variant.planner_params),
-                            refiner_params=dict(variant.refiner_params))
+                            planner_params={**variant.planner_params,
+                                            **_overrides(settings, "global_planner")},
+                            refiner_params={**variant.refiner_params,
+                                            **_overrides(settings, "local_refiner")})
         t0 = time.monotonic()
         demo = run_demo(config)
         wall = time.monotonic() - t0
@@ -375,6 +416,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--results", metavar="FILE",
                    help=f"put the table and command into FILE between {BEGIN} and {END}")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--set", dest="overrides", action="append", default=[],
+                   metavar="NODE.PARAM=VALUE",
+                   help="a global_planner or local_refiner parameter for every variant, on top "
+                        "of the variant's own (repeatable; VALUE as JSON, e.g. "
+                        "local_refiner.monitor_shuttles=true)")
     from ecahd_ros.demo import add_obstacle_arguments
 
     add_obstacle_arguments(p)
@@ -393,7 +439,8 @@ def run(args: argparse.Namespace) -> int:
         variants=tuple(k for k in VARIANT_KEYS if k in chosen),
         realtime_factor=args.realtime_factor, max_steps=args.max_steps,
         hold_steps=args.hold_steps, domain_id=args.domain_id, obstacles=args.obstacles,
-        moving=args.moving, first_episode=args.first_episode)
+        moving=args.moving, first_episode=args.first_episode,
+        overrides=tuple(parse_override(text) for text in args.overrides))
     out = (Path(args.out) if args.out
            else Path("runs") / time.strftime("bench-navigation-%Y%m%d-%H%M%S"))
     result = run_navigation_benchmark(settings, out, progress=not args.no_progress)

@@ -150,10 +150,12 @@ PARAMETERS = [
                                                 "monitor_time_to_collision) closer (its "
                                                 "velocity is an estimate); 0 trusts it"),
     ParamSpec("monitor_shuttles", False, "movers seen going back and forth are predicted "
-                                         "turning round at the ends of their stretch, and the "
-                                         "robot does not start across their beat within "
-                                         "monitor_yield_horizon (off: in the closed loop it "
-                                         "waited for crossers: 10 of 20 reached against 15)"),
+                                         "turning round at the ends of their stretch"),
+    ParamSpec("monitor_beat_horizon", 0.0, "[s] with monitor_shuttles: a command that meets a "
+                                           "mover going back and forth within this horizon "
+                                           "is stopped (the robot does not start across its "
+                                           "beat); 0 = off (3 s: the robot waited for "
+                                           "crossers, 10 of 20 reached against 15)"),
     *shared("seed", "torch_threads"),
 ]
 POSE_HISTORY = 1.0  # [s] of odometry poses kept to place scans by their stamps
@@ -207,6 +209,7 @@ class LocalRefinerParams:
     monitor_yield_horizon: float
     monitor_prediction_growth: float
     monitor_shuttles: bool
+    monitor_beat_horizon: float
     seed: int
     torch_threads: int
 
@@ -217,7 +220,7 @@ class LocalRefinerParams:
         require_non_negative(self, "c_th", "footprint_padding", "plan_timeout", "seed",
                              "clearance_margin",
                              "polish_steps", "prepare_ahead", "obstacle_persistence",
-                             "monitor_prediction_growth")
+                             "monitor_prediction_growth", "monitor_beat_horizon")
         require_positive(self, "local_costmap_size", "local_costmap_rate",
                          "monitor_time_to_collision", "monitor_source_timeout",
                          "monitor_yield_horizon")
@@ -254,7 +257,8 @@ class LocalRefinerParams:
             slowdown_limits=(self.max_v, self.max_w),
             escape_limits=(self.max_v, self.max_w) if self.monitor_yield else None,
             yield_horizon=self.monitor_yield_horizon,
-            prediction_growth=self.monitor_prediction_growth)
+            prediction_growth=self.monitor_prediction_growth,
+            beat_horizon=self.monitor_beat_horizon)
 
     @property
     def scan_offset(self) -> tuple[float, float, float]:

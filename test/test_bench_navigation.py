@@ -107,3 +107,29 @@ def test_one_tiny_run_writes_json_md_and_results(tmp_path):
     assert "stale block" not in text and "--variants astar --max-steps 60 --hold-steps 5" in text
     md = (tmp_path / "nav.md").read_text()
     assert "A* + controller" in md and "held for 5 control steps" in md
+
+
+def test_set_overrides_a_node_parameter_for_every_variant_and_names_bad_ones():
+    from ecahd_core.errors import EcahdError
+
+    assert nav.parse_override("local_refiner.monitor_shuttles=true") == (
+        "local_refiner", "monitor_shuttles", True)
+    assert nav.parse_override("local_refiner.max_v=0.3") == ("local_refiner", "max_v", 0.3)
+    value = nav.parse_override("local_refiner.max_v=1")[2]
+    assert value == 1.0 and isinstance(value, float)  # a double parameter stays a double
+    assert nav.parse_override("global_planner.replan=once") == (
+        "global_planner", "replan", "once")  # not JSON: a string
+    for bad, what in (("local_refiner.max_v", "NODE.PARAM=VALUE"),
+                      ("sim_bridge.rate_hz=10", "not one of"),
+                      ("local_refiner.no_such=1", "no parameter 'no_such'")):
+        with pytest.raises(EcahdError, match=what):
+            nav.parse_override(bad)
+    settings = nav.NavigationBenchSettings(overrides=(
+        nav.parse_override("local_refiner.max_v=0.3"),
+        nav.parse_override("global_planner.num_candidates=4")))
+    assert nav._overrides(settings, "local_refiner") == {"max_v": 0.3}
+    assert nav._overrides(settings, "global_planner") == {"num_candidates": 4}
+    args = build_parser().parse_args(["bench", "navigation", "--set",
+                                      "local_refiner.max_v=0.3", "--set",
+                                      "local_refiner.monitor_shuttles=true"])
+    assert args.overrides == ["local_refiner.max_v=0.3", "local_refiner.monitor_shuttles=true"]

@@ -346,6 +346,11 @@ def test_a_robot_does_not_start_across_the_beat_of_a_cylinder_going_back_and_for
     assert straight.action == "none"
     # along +y: the centre (0.6) turns at 0.9 (0.3 m ahead) and at -0.9 (1.5 m behind)
     bounds = np.tile([-1.5, 0.3], (len(pts), 1))
+    # without the beat rule (the default) the folded prediction alone lets it go: within the
+    # 1 s stop horizon the cylinder does not come back
+    assert monitor.filter(ORIGIN, 0.5, 0.0, pts, 0.0, 0.0, velocities=vel, bounds=bounds,
+                          depths=open_floor).action == "none"
+    monitor = yielding(beat_horizon=3.0)
     beat = monitor.filter(ORIGIN, 0.5, 0.0, pts, 0.0, 0.0, velocities=vel, bounds=bounds,
                           depths=open_floor)
     assert beat.action == "stop" and "back and forth" in beat.reason
