@@ -201,18 +201,17 @@ def run_navigation_benchmark(settings: NavigationBenchSettings, out: Path, *,
     bar = tqdm(chosen, desc="bench navigation", unit="variant", disable=not progress)
     for i, variant in enumerate(bar):
         bar.set_postfix_str(variant.label)
+        planner_params = {**variant.planner_params, **_overrides(settings, "global_planner")}
+        refiner_params = {**variant.refiner_params, **_overrides(settings, "local_refiner")}
         log.info("variant %d/%d: %s (planner %s, refiner %s), domain %d", i + 1, len(chosen),
-                 variant.label, variant.planner_params, variant.refiner_params, base + i)
+                 variant.label, planner_params, refiner_params, base + i)
         config = DemoConfig(out=out / variant.key, episodes=settings.episodes,
                             robot=settings.robot, map=settings.map, seed=settings.seed,
                             realtime_factor=settings.realtime_factor,
                             max_steps=settings.max_steps, hold_steps=settings.hold_steps,
                             domain_id=base + i, obstacles=settings.obstacles,
                             moving=settings.moving, first_episode=settings.first_episode,
-                            planner_params={**variant.planner_params,
-                                            **_overrides(settings, "global_planner")},
-                            refiner_params={**variant.refiner_params,
-                                            **_overrides(settings, "local_refiner")})
+                            planner_params=planner_params, refiner_params=refiner_params)
         t0 = time.monotonic()
         demo = run_demo(config)
         wall = time.monotonic() - t0
@@ -315,8 +314,10 @@ def format_markdown(result: NavigationBenchResult) -> str:
         f"Closed loop on {s.map}, robot {s.robot}, {s.episodes} seeded "
         f"episode{'s' if s.episodes != 1 else ''} (seed {s.seed}"
         f"{f', from episode {s.first_episode}' if s.first_episode else ''}), the same goals "
-        f"for every "
-        f"variant; sim_bridge at {c['sim_rate_hz']:g} "
+        f"for every variant"
+        + "".join(f"; {node}.{name} = {value!r} on every variant"
+                  for node, name, value in s.overrides)
+        + f"; sim_bridge at {c['sim_rate_hz']:g} "
         f"steps per sim second, realtime factor {s.realtime_factor:g}; local_refiner control "
         f"every {c['control_period_s']:g} s of sim time ({c['control_rate_hz']:g} Hz), "
         f"|v| <= {c['max_v']:g} m/s, |w| <= {c['max_w']:g} rad/s, |dv/dt| <= "
@@ -350,6 +351,9 @@ def command_line(settings: NavigationBenchSettings) -> str:
         argv += ["--max-steps", str(settings.max_steps)]
     if settings.hold_steps != d.hold_steps:
         argv += ["--hold-steps", str(settings.hold_steps)]
+    for node, name, value in settings.overrides:
+        text = value if isinstance(value, str) else json.dumps(value)
+        argv += ["--set", f"{node}.{name}={text}"]
     return shlex.join(argv)
 
 

@@ -129,6 +129,8 @@ def test_set_overrides_a_node_parameter_for_every_variant_and_names_bad_ones():
         nav.parse_override("global_planner.num_candidates=4")))
     assert nav._overrides(settings, "local_refiner") == {"max_v": 0.3}
     assert nav._overrides(settings, "global_planner") == {"num_candidates": 4}
+    assert nav.command_line(settings).endswith(
+        "--set local_refiner.max_v=0.3 --set global_planner.num_candidates=4")
     args = build_parser().parse_args(["bench", "navigation", "--set",
                                       "local_refiner.max_v=0.3", "--set",
                                       "local_refiner.monitor_shuttles=true"])
