@@ -149,8 +149,10 @@ PARAMETERS = [
                                                 "counts as this times min(t, "
                                                 "monitor_time_to_collision) closer (its "
                                                 "velocity is an estimate); 0 trusts it"),
-    ParamSpec("monitor_shuttles", False, "movers seen going back and forth are predicted "
-                                         "turning round at the ends of their stretch"),
+    ParamSpec("monitor_shuttles", True, "movers seen going back and forth are predicted "
+                                        "turning round at the ends of their stretch (false: "
+                                        "straight on; moving-contact episodes 2 of 20 with, "
+                                        "6-10 without, docs/RESULTS.md)"),
     ParamSpec("monitor_beat_horizon", 0.0, "[s] with monitor_shuttles: a command that meets a "
                                            "mover going back and forth within this horizon "
                                            "is stopped (the robot does not start across its "
