@@ -185,6 +185,7 @@ class GlobalRunner:
         self.blocked_count = 0  # "blocked" replans asked for since the goal arrived
         self._hold = False  # the current goal's plan is followed to the end (a fallback)
         self.stalls = 0  # timeout replans since a waypoint was last reached
+        self.stall_timeout = config.replan_timeout  # [s] the last timeout replan's wait
 
     @property
     def active(self) -> bool:
@@ -249,7 +250,7 @@ class GlobalRunner:
         timeout = c.replan_timeout * 2 ** min(self.stalls, MAX_STALL_DOUBLINGS)
         if c.replan_timeout > 0 and now - self._last_plan > timeout:
             self._last_plan = now  # one timeout replan per period even if planning fails
-            self.stalls += 1
+            self.stalls, self.stall_timeout = self.stalls + 1, timeout
             return PlanRequest(xy, self.goal.copy(), horizon, "timeout")
         return None
 

@@ -74,8 +74,8 @@ from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ecahd_core.errors import EcahdError, PlanningError
-from ecahd_core.navigation import (MAX_STALL_DOUBLINGS, REPLAN_POLICIES, SNAP_DISTANCE,
-                                   GlobalRunner, GlobalRunnerConfig, PlanRequest, validate_pose)
+from ecahd_core.navigation import (REPLAN_POLICIES, SNAP_DISTANCE, GlobalRunner,
+                                   GlobalRunnerConfig, PlanRequest, validate_pose)
 from ecahd_core.planner import SELECTION_RULES, SparseConfig, SparseDiffusion, SparsePlan
 from ecahd_ros.conversions import msg_to_grid, timing_message, xy_to_path
 from ecahd_ros.params import (ParamSpec, declare_parameters, make_robot, read_parameters,
@@ -444,11 +444,9 @@ class GlobalPlanner(Node):
             self.get_logger().info(f"goal ({goal[0]:.2f}, {goal[1]:.2f}) reached")
         elif isinstance(event, PlanRequest):
             if event.reason == "timeout":
-                stalls = self.runner.stalls
-                waited = self.params.replan_timeout * 2 ** min(stalls - 1, MAX_STALL_DOUBLINGS)
-                self.get_logger().warning(f"no waypoint reached for {waited:g} s: replanning "
-                                          f"from the current pose (timeout replan {stalls} in "
-                                          "a row)")
+                self.get_logger().warning(
+                    f"no waypoint reached for {self.runner.stall_timeout:g} s: replanning from "
+                    f"the current pose (timeout replan {self.runner.stalls} in a row)")
             self._plan(event)
 
     # ----------------------------------------------------------------------------- planning

@@ -62,6 +62,7 @@ def test_timeout_replans_back_off_until_a_waypoint_is_reached():
             fired.append(t)
             r.accept(PLAN, t)
     assert fired == [2.1, 6.2, 14.3, 30.4, 46.5]
+    assert (r.stalls, r.stall_timeout) == (5, 16.0)
     req = r.step((0.95, 0.0), 47.0)  # a waypoint reached: back to 2 s
     assert req.reason == "waypoint" and r.stalls == 0
     r.accept(PLAN[1:], 47.0)
