@@ -249,10 +249,12 @@ def shuttle_bounds(points: np.ndarray, velocities: np.ndarray, trail: np.ndarray
     if len(moving) == 0 or len(trail) == 0:
         return out
     u = velocities[moving] / speed[moving, None]  # (m, 2) unit directions
-    rel = trail[None, :, :] - points[moving, None, :]  # (m, K, 2)
-    s = np.einsum("mkd,md->mk", rel, u)  # (m, K) [m] along the motion
-    off = np.abs(rel[..., 0] * u[:, None, 1] - rel[..., 1] * u[:, None, 0])  # (m, K) lateral
-    along = np.einsum("kd,md->mk", trail_velocities, u)  # (m, K) [m/s] trail speed along u
+    p = points[moving]  # (m, 2)
+    normal = np.stack([u[:, 1], -u[:, 0]], axis=1)  # (m, 2): (t - p) x u = (t - p) . normal
+    # (m, K) [m] along the motion and off it: matrix products, no (m, K, 2) temporaries
+    s = u @ trail.T - np.sum(p * u, axis=1)[:, None]
+    off = np.abs(normal @ trail.T - np.sum(p * normal, axis=1)[:, None])
+    along = u @ trail_velocities.T  # (m, K) [m/s] trail speed along u
     trail_speed = np.hypot(trail_velocities[:, 0], trail_velocities[:, 1])  # (K,)
     on = off <= lateral  # (m, K)
     back = on & (along < -0.5 * trail_speed[None, :])  # moved the other way on this line
