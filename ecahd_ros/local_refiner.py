@@ -157,7 +157,7 @@ PARAMETERS = [
                                            "mover going back and forth within this horizon "
                                            "is stopped (the robot does not start across its "
                                            "beat); 0 = off (3 s: the robot waited for "
-                                           "crossers, 10 of 20 reached against 15)"),
+                                           "crossers, 10 of 20 reached against 14)"),
     *shared("seed", "torch_threads"),
 ]
 POSE_HISTORY = 1.0  # [s] of odometry poses kept to place scans by their stamps
