@@ -28,6 +28,7 @@ log = logging.getLogger(__name__)
 MODELS_DIR = Path(__file__).resolve().parent / "models"
 MODELS_ENV = "ECAHD_MODELS"
 KINDS = ("sd", "dd", "fd")
+DEFAULT_DENSE_POINTS = 4  # P^l of the paper's DD (2 interior points); a DD checkpoint says its own
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -48,6 +49,10 @@ class ModelRecipe:
         ema_decay: EMA of the sampling weights.
         sample_steps: DDIM steps used when sampling (recorded in the checkpoint; K = 100
             training steps).
+        batch_horizon: the trajectory length ``batch_size`` was sized for (None: any). A model
+            trained on longer trajectories gets a proportionally smaller batch, so a step
+            costs about the same (a DD of more than 4 points, ``ecahd dataset --dense-points
+            N``; see :meth:`batch_for`).
     """
 
     architecture: str = "transformer"
@@ -63,6 +68,15 @@ class ModelRecipe:
     lr: float = 1e-4
     ema_decay: float = 0.999
     sample_steps: int = 10
+    batch_horizon: int | None = None
+
+    def batch_for(self, max_horizon: int) -> int:
+        """The batch size for trajectories of up to ``max_horizon`` points: ``batch_size``, or
+        for a ``batch_horizon`` recipe the same number of tokens per step (each trajectory is
+        P + 1 tokens, the +1 the diffusion step's), at least 32."""
+        if self.batch_horizon is None or max_horizon <= self.batch_horizon:
+            return self.batch_size
+        return max(32, round(self.batch_size * (self.batch_horizon + 1) / (max_horizon + 1)))
 
     def denoiser_config(self, max_horizon: int):
         """The :class:`~ecahd_core.diffusion.DenoiserConfig` for trajectories of up to
@@ -88,7 +102,7 @@ RECIPES: dict[str, ModelRecipe] = {
     "sd": ModelRecipe(d_model=128, n_layers=4, n_heads=4, steps=12000, batch_size=256,
                       warmup_steps=500),
     "dd": ModelRecipe(d_model=96, n_layers=2, n_heads=4, steps=4000, batch_size=256,
-                      warmup_steps=300),
+                      warmup_steps=300, batch_horizon=DEFAULT_DENSE_POINTS),
     "fd": ModelRecipe(architecture="temporal_unet", unet_channels=(32, 64, 128),
                       unet_kernel_size=5, prediction="sample", steps=3300, batch_size=64,
                       warmup_steps=250, lr=1e-3, ema_decay=0.995),
@@ -232,6 +246,11 @@ def _check_fit(ckpt, path, footprint, horizon) -> None:
     if horizon is not None and int(horizon) not in ckpt.horizons:
         raise CheckpointError(f"checkpoint '{path}' was trained for "
                               f"horizons {list(ckpt.horizons)}, not {horizon}")
+
+
+def dense_points(checkpoint) -> int:
+    """P^l, the points of a local plan a DD checkpoint learnt (the longest of its horizons)."""
+    return int(max(checkpoint.horizons))
 
 
 def sample_steps(checkpoint) -> int:

@@ -12,7 +12,7 @@ Selection rules for the best of N candidates t^{g,(i)} (Sec. III-A):
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import torch
@@ -328,7 +328,10 @@ class DenseConfig:
     """Settings of the local stage (Algorithm 1 lines 13-18, Algorithm 2).
 
     Attributes:
-        points: P^l, points of a local plan (endpoints included).
+        points: P^l, points of a local plan (endpoints included). None: the P^l the DD
+            checkpoint learnt (:func:`~ecahd_core.model_zoo.dense_points`; 4, the paper's 2
+            interior points, for every model ``train-all`` makes; another with
+            ``ecahd dataset --dense-points N``), and ``DEFAULT_DENSE_POINTS`` without DD.
         c_th: DD runs when the straight local plan's collision cost exceeds this.
         enabled: run DD at all (False: follow the straight local plans, "w/o DD").
         guidance: guide DD by J (ECAHD) or not (HD without guidance).
@@ -354,7 +357,7 @@ class DenseConfig:
             plan (polishing then starts from it). False is the paper's behaviour.
     """
 
-    points: int = 4
+    points: int | None = None
     c_th: float = 0.1
     enabled: bool = True
     guidance: bool = True
@@ -371,6 +374,8 @@ class DenseConfig:
 
     def __post_init__(self) -> None:
         self.polish_config()  # validates the polishing settings
+        if self.points is not None and self.points < 2:
+            raise EcahdError(f"a local plan needs points >= 2 (P^l), got {self.points}")
 
     def polish_config(self):
         from ecahd_core.polish import PolishConfig
@@ -481,8 +486,16 @@ class HierarchicalPlanner:
         from ecahd_core.diffusion import DiffusionSampler, SamplerConfig
         from ecahd_core.model_zoo import sample_steps
 
+        from ecahd_core.model_zoo import DEFAULT_DENSE_POINTS, dense_points
+
         self.sparse = sparse
         self.dense = dense or DenseConfig()
+        if self.dense.points is None:  # P^l: the DD checkpoint's
+            self.dense = replace(self.dense, points=(
+                dense_points(dense_checkpoint) if self.dense.enabled else DEFAULT_DENSE_POINTS))
+        elif self.dense.enabled and self.dense.points not in dense_checkpoint.horizons:
+            raise EcahdError(f"DenseConfig.points = {self.dense.points}, but the DD checkpoint "
+                             f"learnt P^l in {list(dense_checkpoint.horizons)}")
         self.cost_config = cost_config or CostConfig()
         self.costmap = costmap
         self.footprint_points = torch.as_tensor(footprint_points, dtype=costmap.dtype,

@@ -304,15 +304,14 @@ class LocalRefiner(Node):
         if p.dd_enabled:  # an unreadable or mismatched model fails now, not at the first map
             from ecahd_core.model_zoo import check_model
 
-            check_model("dd", p.map_name, path=p.dd_model or None, footprint=self.footprint,
-                        horizon=DenseConfig().points)
+            check_model("dd", p.map_name, path=p.dd_model or None, footprint=self.footprint)
         from ecahd_core.threads import set_torch_threads
 
         import torch
 
         set_torch_threads(p.torch_threads)
         self.generator = torch.Generator().manual_seed(p.seed)
-        self.points = DenseConfig().points  # P^l
+        self.points = None  # P^l, the DD checkpoint's (DenseConfig.points) once a map arrives
         self.grid = None
         self.planner = None  # HierarchicalPlanner (its local stage only) once a map arrives
         self._lock = threading.Lock()  # the runner is shared by the callback threads
@@ -362,7 +361,7 @@ class LocalRefiner(Node):
         on_parameter_change(self, PARAMETERS, lambda: self.params, self._apply_params)
         self._last_reason = None
         dd = f"DD above c_th={p.c_th:g}" if p.dd_enabled else "DD disabled"
-        self.get_logger().info(f"local refiner ready: P^l={self.points}, {dd}, "
+        self.get_logger().info(f"local refiner ready: {dd}, "
                                f"{p.control_rate:g} Hz, robot {self.footprint.name!r}")
 
     # reading the runner's state (tests, the demo)
@@ -420,14 +419,14 @@ class LocalRefiner(Node):
         from ecahd_core.planner import HierarchicalPlanner
 
         p = self.params
-        ckpt = (load_model("dd", grid, path=p.dd_model or None, footprint=self.footprint,
-                           horizon=self.points) if p.dd_enabled else None)
+        ckpt = (load_model("dd", grid, path=p.dd_model or None, footprint=self.footprint)
+                if p.dd_enabled else None)
         cost = CollisionCost.build(grid, self.footprint)
         # only the local stage (local_cost, refine, polish) is used: no SD model here
         planner = HierarchicalPlanner(
             None, ckpt, costmap=cost.costmap, footprint_points=cost.footprint_points,
             cost_config=cost.config,
-            dense=DenseConfig(points=self.points, c_th=p.c_th, enabled=p.dd_enabled,
+            dense=DenseConfig(c_th=p.c_th, enabled=p.dd_enabled,
                               polish_steps=p.polish_steps))
         refiner = SegmentRefiner(planner, grid, self.judged,
                                  generator=self.generator, exact=p.exact_check)
@@ -440,10 +439,12 @@ class LocalRefiner(Node):
                                shuttles=p.monitor_shuttles)
         with self._lock, self._world_lock:
             self.grid, self.planner, self.refiner, self.world = grid, planner, refiner, world
+            self.points = planner.dense.points
             self.runner.refine = refiner
             self.runner.reset_costs()  # the current plan's segments are refined on this map
         self.get_logger().info(f"map {grid.name!r} received; "
-                               f"{'DD model and ' if p.dd_enabled else ''}cost J ready")
+                               f"{'DD model and ' if p.dd_enabled else ''}cost J ready, "
+                               f"P^l={self.points}")
 
     def _on_plan(self, msg: Path) -> None:
         p = self.params

@@ -35,6 +35,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=7, help="seed of the problems")
     ap.add_argument("--robot", default="circle")
     ap.add_argument("--max-spacing", type=float, default=None, help="SparseConfig.max_spacing")
+    ap.add_argument("--candidates", type=int, default=10, help="SD's best of N")
     ap.add_argument("--place", type=float, default=None, metavar="REACH",
                     help="SD's waypoints in a wall moved into free space within REACH m "
                          "(placement.WaypointPlacer, the SparseDiffusion's placer)")
@@ -46,7 +47,8 @@ def main() -> None:
     grid, fp = load_map(args.map), make_footprint(args.robot)
     cost = CollisionCost.build(grid, fp, CostConfig()).as_tuple()
     sd = SparseDiffusion(load_model("sd", grid, footprint=fp),
-                         SparseConfig(num_candidates=10, max_spacing=args.max_spacing), cost=cost,
+                         SparseConfig(num_candidates=args.candidates, selection="collision_aware",
+                                      max_spacing=args.max_spacing), cost=cost,
                          placer=None if args.place is None else WaypointPlacer(
                              grid, fp, reach=args.place, leg_rounds=args.leg_rounds))
     hd = HierarchicalPlanner(sd, load_model("dd", grid, footprint=fp), costmap=cost[0],
@@ -54,6 +56,7 @@ def main() -> None:
                              replan="once")
     gen = torch.Generator().manual_seed(0)
     rows = []  # (length [m], an end in a wall, straight free, local plan free)
+    bad_ends = []  # (a, b) [m] of every segment still colliding after the local stage
     free_plans = 0
     shown = []  # (problem, segment, SD waypoints, trajectory, segment) still colliding
     for n, prob in enumerate(make_problems(grid, args.problems, seed=args.seed)):
@@ -66,6 +69,8 @@ def main() -> None:
             rows.append((float(np.linalg.norm(wp[k + 1] - wp[k])), in_wall[k] or in_wall[k + 1],
                          check_collision(wp[k:k + 2], fp, grid).collision_free,
                          check_collision(seg, fp, grid).collision_free))
+            if not rows[-1][3]:
+                bad_ends.append((wp[k], wp[k + 1]))
             if not rows[-1][3] and len(shown) < 8:
                 shown.append((n, k, wp, plan.trajectory, seg))
         free = check_collision(plan.trajectory, fp, grid).collision_free
@@ -90,6 +95,22 @@ def main() -> None:
           f"{100 * (1 - r[ok, 3].mean()):.1f}%")
     worse = int(((r[:, 2] == 1) & (r[:, 3] == 0)).sum())
     print(f"segments whose straight leg was free but the local stage's plan collides: {worse}")
+    # what a local stage could clear at all: the footprint's A* way between the two ends
+    from ecahd_core.astar import clearance_for_footprint, planner_for
+    from ecahd_core.errors import PlanningError
+
+    astar = planner_for(grid, clearance_for_footprint(fp))
+    kinds = {"near (A* <= 1.3 x straight)": 0, "detour (A* > 1.3 x)": 0, "no A* way": 0}
+    for a, b in bad_ends:
+        try:
+            ratio = float(np.linalg.norm(np.diff(astar.plan(a, b), axis=0), axis=1).sum()
+                          / max(np.linalg.norm(b - a), 1e-6))
+        except PlanningError:
+            kinds["no A* way"] += 1
+            continue
+        kinds["near (A* <= 1.3 x straight)" if ratio <= 1.3 else "detour (A* > 1.3 x)"] += 1
+    print(f"segments still colliding ({len(bad_ends)}), by the footprint's A* way between "
+          "their ends: " + ", ".join(f"{k}: {v}" for k, v in kinds.items()))
     if args.png:
         draw(grid, fp, shown, args.png)
 

@@ -145,3 +145,13 @@ def test_models_are_found_through_ecahd_models(tmp_path, monkeypatch):
     assert load_model("sd", grid).meta["dataset_pairs"] == 6
     # the package's own models stay found behind the others
     assert shipped_path("maze2d-large", "sd") == MODELS_DIR / "maze2d-large_sd.pt"
+
+
+def test_dd_batch_keeps_the_tokens_per_step_for_longer_local_plans():
+    from ecahd_core.model_zoo import recipe
+
+    dd, sd = recipe("dd"), recipe("sd")
+    assert dd.batch_for(4) == dd.batch_size == 256  # the paper's P^l: unchanged
+    assert dd.batch_for(15) == round(256 * 5 / 16) == 80
+    assert dd.batch_for(1000) == 32
+    assert sd.batch_for(10) == sd.batch_size  # SD's batch is not scaled

@@ -235,3 +235,37 @@ def test_a_batch_of_local_stages_gives_each_segment_what_it_gets_alone():
         assert torch.equal(batch.plans[k, 0], a[k])
         if end_fixed[k]:
             assert torch.equal(batch.plans[k, -1], b[k])
+
+
+def test_local_plans_have_the_points_the_dd_checkpoint_learnt(tmp_path):
+    # P^l is the DD checkpoint's (DenseConfig.points None): the paper's 4 for the shipped model;
+    # a DD trained on 7-point segments (a big map's "auto" P^l) gives 7-point local plans
+    from ecahd_core.diffusion import DenoiserConfig, Normalizer, TrainConfig, train
+    from ecahd_core.errors import EcahdError
+    from ecahd_core.model_zoo import dense_points
+
+    fp = make_footprint("circle")
+    cc = CostConfig()
+    shipped = load_model("dd", GRID, footprint=fp)
+    assert dense_points(shipped) == 4 and make_planner().dense.points == 4
+    sd = SparseDiffusion(load_model("sd", GRID, footprint=fp), SparseConfig(num_candidates=2))
+    common = dict(costmap=cc.make_costmap(GRID), footprint_points=fp.points, cost_config=cc)
+    with pytest.raises(EcahdError, match=r"learnt P\^l in \[4\]"):
+        HierarchicalPlanner(sd, shipped, dense=DenseConfig(points=7), **common)
+    assert HierarchicalPlanner(sd, None, dense=DenseConfig(enabled=False),
+                               **common).dense.points == 4
+    rng = np.random.default_rng(0)
+    a = rng.uniform([1, 1], [11, 8], size=(32, 2))
+    segs = a[:, None] + np.linspace(0, 1, 7)[None, :, None] * rng.normal(0, 0.5, (32, 1, 2))
+    meta = {**shipped.meta}
+    result = train(DenoiserConfig(max_horizon=7, d_model=16, n_layers=1, n_heads=2),
+                   {7: segs.astype(np.float32)}, Normalizer.from_bounds(*GRID.bounds),
+                   TrainConfig(steps=2, batch_size=8, warmup_steps=0, device="cpu"), kind="dd",
+                   out_path=tmp_path / "dd7.pt", meta=meta, progress=False)
+    hd = HierarchicalPlanner(sd, result.checkpoint, dense=DenseConfig(c_th=-1.0), **common)
+    assert hd.dense.points == 7
+    stages = hd.local_stages(torch.tensor([[1.5, 1.5]]), torch.tensor([[1.5, 3.5]]),
+                             end_fixed=torch.tensor([True]))
+    assert stages.plans.shape == (1, 7, 2) and bool(stages.dd_used[0])
+    np.testing.assert_allclose(stages.plans[0, [0, -1]].numpy(), [[1.5, 1.5], [1.5, 3.5]],
+                               atol=1e-5)

@@ -74,7 +74,7 @@ def run_sampling_benchmark(settings: SamplingBenchSettings, *, models: dict | No
     from ecahd_core.footprint import make_footprint
     from ecahd_core.guidance import CostJGuide
     from ecahd_core.maps import load_map
-    from ecahd_core.model_zoo import load_model, sample_steps
+    from ecahd_core.model_zoo import dense_points, load_model, sample_steps
     from ecahd_core.problems import make_problems
 
     if settings.threads:
@@ -121,7 +121,7 @@ def run_sampling_benchmark(settings: SamplingBenchSettings, *, models: dict | No
     from ecahd_core.dataset import resample_by_arclength
     wp = torch.tensor(resample_by_arclength(problem.astar_path, 10), dtype=torch.float32)
     seg_start, seg_goal = wp[:-1], wp[1:]  # (9, 2)
-    n_seg, P_l = len(seg_start), 4
+    n_seg, P_l = len(seg_start), dense_points(ckpt["dd"])  # P^l the DD learnt
     guide = CostJGuide(costmap, footprint.points, seg_goal, cost_config)
 
     def dd():

@@ -72,7 +72,8 @@ def train_one(kind: str, dataset, *, out: Path, seed: int, device: str, steps: i
     steps = steps or max(1, int(round(r.steps * steps_scale)))
     warmup = warmup if warmup is not None else int(round(r.warmup_steps * min(1.0, steps_scale)))
     config = r.denoiser_config(max(arrays))
-    tc = TrainConfig(steps=steps, batch_size=batch_size or r.batch_size, warmup_steps=warmup,
+    tc = TrainConfig(steps=steps, batch_size=batch_size or r.batch_for(max(arrays)),
+                     warmup_steps=warmup,
                      lr=r.lr, ema_decay=r.ema_decay, seed=seed, device=device,
                      log_every=max(1, min(100, steps // 20)))
     normalizer = Normalizer.from_bounds(*dataset.grid().bounds)
@@ -89,6 +90,8 @@ def train_one(kind: str, dataset, *, out: Path, seed: int, device: str, steps: i
 
 # the horizons each kind learns with the dataset's defaults (ecahd_core.dataset): SD 2..P^g,
 # DD P^l points, FD the whole 100-point sequence; only their lengths matter to a step's cost
+# (a DD of more points, `ecahd dataset --dense-points N`, trains with a batch of as many
+# tokens: ModelRecipe.batch_for)
 ESTIMATE_HORIZONS = {"sd": tuple(range(2, 11)), "dd": (4,), "fd": (100,)}
 
 
