@@ -135,6 +135,7 @@ class SafetyNet:
         from ecahd_core.astar import clearance_for_footprint
 
         self.grid = grid
+        grid.free_distance  # noqa: B018  once per map: the exact checks below pass far poses
         self.footprint = footprint
         self.config = config or SafetyNetConfig()
         self.planner = planner

@@ -6,7 +6,8 @@ waypoints is judged by the exact checker: is a waypoint itself in a wall, does t
 segment collide, does the local stage's plan (DD + polishing) still collide; by segment length.
 
     ECAHD_MODELS=DIR python scripts/diagnose_segments.py MAP.yaml [--problems 16] [--seed 7]
-        [--max-spacing M] [--place REACH [--leg-rounds N]] [--png FILE]
+        [--max-spacing M] [--place REACH [--leg-rounds N]] [--candidates N]
+        [--selection RULE] [--png FILE]
 """
 from __future__ import annotations
 
@@ -22,7 +23,8 @@ from ecahd_core.footprint import make_footprint
 from ecahd_core.maps import load_map
 from ecahd_core.model_zoo import load_model
 from ecahd_core.placement import WaypointPlacer
-from ecahd_core.planner import DenseConfig, HierarchicalPlanner, SparseConfig, SparseDiffusion
+from ecahd_core.planner import (SELECTION_RULES, DenseConfig, HierarchicalPlanner, SparseConfig,
+                                SparseDiffusion)
 from ecahd_core.problems import make_problems
 
 BINS = ((0, 1), (1, 2), (2, 3), (3, 5), (5, 1000))  # [m] segment lengths
@@ -36,6 +38,9 @@ def main() -> None:
     ap.add_argument("--robot", default="circle")
     ap.add_argument("--max-spacing", type=float, default=None, help="SparseConfig.max_spacing")
     ap.add_argument("--candidates", type=int, default=10, help="SD's best of N")
+    ap.add_argument("--selection", choices=SELECTION_RULES, default="collision_aware",
+                    help="SD's best-of-N rule (the commands' default; shortest_reaching: the "
+                         "paper's)")
     ap.add_argument("--place", type=float, default=None, metavar="REACH",
                     help="SD's waypoints in a wall moved into free space within REACH m "
                          "(placement.WaypointPlacer, the SparseDiffusion's placer)")
@@ -47,7 +52,7 @@ def main() -> None:
     grid, fp = load_map(args.map), make_footprint(args.robot)
     cost = CollisionCost.build(grid, fp, CostConfig()).as_tuple()
     sd = SparseDiffusion(load_model("sd", grid, footprint=fp),
-                         SparseConfig(num_candidates=args.candidates, selection="collision_aware",
+                         SparseConfig(num_candidates=args.candidates, selection=args.selection,
                                       max_spacing=args.max_spacing), cost=cost,
                          placer=None if args.place is None else WaypointPlacer(
                              grid, fp, reach=args.place, leg_rounds=args.leg_rounds))

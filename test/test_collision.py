@@ -352,3 +352,31 @@ def test_agrees_with_point_sampling(robot):
             assert not hit, (x, y, th)
         if rep.max_depth > 0.01:
             assert hit, (x, y, th)
+
+
+@pytest.mark.parametrize("robot", ["circle", "quadruped"])
+def test_far_poses_passed_by_the_distance_transform_give_the_same_verdicts(robot):
+    # a grid that holds its free_distance lets check_collision skip poses far from every wall;
+    # verdicts, depths and first collisions are those of the full test
+    from ecahd_core.mapgen import MapGenConfig, generate_map
+
+    fp = make_footprint(robot)
+    plain = generate_map(MapGenConfig("office", 12, 10, 0.05, 3))
+    fast = generate_map(MapGenConfig("office", 12, 10, 0.05, 3))
+    d = fast.free_distance
+    assert d.shape == (fast.height, fast.width) and float(d[fast.occupied].max()) == 0.0
+    assert "free_distance" not in plain.__dict__
+    rng = np.random.default_rng(0)
+    verdicts = []
+    for _ in range(40):
+        traj = rng.uniform([1.0, 1.0], [11.0, 9.0]) + np.cumsum(rng.normal(0, 0.4, (4, 2)), 0)
+        a, b = check_collision(traj, fp, plain), check_collision(traj, fp, fast)
+        assert a.collision_free == b.collision_free
+        assert a.first_collision_index == b.first_collision_index
+        np.testing.assert_array_equal(a.colliding, b.colliding)
+        np.testing.assert_allclose(a.depths, b.depths)
+        verdicts.append(a.collision_free)
+    assert 0 < sum(verdicts) < len(verdicts)  # both kinds were checked
+    # off the map counts as occupied there too
+    off = np.array([[-1.0, 5.0], [0.2, 5.0]])
+    assert not check_collision(off, fp, fast).collision_free
