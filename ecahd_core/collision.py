@@ -101,7 +101,10 @@ def check_collision(traj, footprint: Footprint, grid: GridMap, *, step: float | 
     # a circle looks the same at every heading: turning on the spot needs no extra poses
     turn_radius = 0.0 if footprint.is_circle else footprint.circumscribed_radius
     poses = densify(traj, step=step, headings=headings, turn_radius=turn_radius)
-    depths = _depths_far_passed(poses, footprint, grid)  # (N,)
+    # a grid whose free_distance its users built (safety net, placement, the monitor's static
+    # map) passes far poses; one without it (e.g. fused with a scan) is not given one here
+    depths = (far_passed_depths if "free_distance" in grid.__dict__ else _pose_depths)(
+        poses, footprint, grid)  # (N,)
     colliding = depths > tolerance
     depths = np.where(colliding, depths, 0.0)
     hits = np.flatnonzero(colliding)
@@ -270,24 +273,28 @@ def pose_depths(poses, footprint: Footprint, grid: GridMap) -> np.ndarray:
     return _pose_depths(poses, footprint, grid)
 
 
-def _depths_far_passed(poses: np.ndarray, footprint: Footprint, grid: GridMap) -> np.ndarray:
-    """:func:`_pose_depths`, except that where ``grid`` already holds its ``free_distance``
-    (computed once per static map by its users: the safety net, placement), poses whose cell
-    lies farther than the circumscribed radius + sqrt(2) cells from every occupied cell get
-    -inf without their cells being tested. Exact: a pose is within half a cell diagonal of its
-    cell's centre and an occupied square's points within half a diagonal of theirs, so such a
-    pose's footprint is at least that far from every occupied square (free)."""
-    dist = grid.__dict__.get("free_distance")
-    if dist is None:
-        return _pose_depths(poses, footprint, grid)
-    rows, cols = grid.world_to_cell(poses[:, :2])
-    inside = (rows >= 0) & (rows < grid.height) & (cols >= 0) & (cols < grid.width)
-    clear = np.zeros(len(poses))
-    clear[inside] = dist[rows[inside], cols[inside]]
-    near = clear - math.sqrt(2.0) * grid.resolution <= footprint.circumscribed_radius
+def far_passed_depths(poses: np.ndarray, footprint: Footprint, grid: GridMap) -> np.ndarray:
+    """:func:`pose_depths` of (N, 3) poses, fast far from walls: a pose whose cell lies farther
+    than the circumscribed radius + sqrt(2) cells from every occupied cell (``grid``'s
+    ``free_distance``, built on first use) gets -inf without its cells being tested. Exact: a
+    pose is within half a cell diagonal of its cell's centre and an occupied square's points
+    within half a diagonal of theirs, so such a pose's footprint is at least that far from
+    every occupied square (free)."""
+    near = wall_distance(grid, poses[:, :2]) - math.sqrt(2.0) * grid.resolution \
+        <= footprint.circumscribed_radius  # (N,)
     out = np.full(len(poses), -np.inf)
     if near.any():
         out[near] = _pose_depths(poses[near], footprint, grid)
+    return out
+
+
+def wall_distance(grid: GridMap, xy: np.ndarray) -> np.ndarray:
+    """(N, 2) [m] -> (N,) [m] distance from each point's cell centre to the nearest occupied
+    cell centre (``grid.free_distance``; off the map: 0, beyond its edge counts as occupied)."""
+    rows, cols = grid.world_to_cell(xy)
+    inside = (rows >= 0) & (rows < grid.height) & (cols >= 0) & (cols < grid.width)
+    out = np.zeros(len(xy))
+    out[inside] = grid.free_distance[rows[inside], cols[inside]]
     return out
 
 

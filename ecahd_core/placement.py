@@ -46,7 +46,6 @@ class WaypointPlacer:
             raise EcahdError(f"the waypoint placement's reach must be a finite number > 0 m, "
                              f"got {reach}")
         self.grid, self.footprint, self.reach = grid, footprint, float(reach)
-        grid.free_distance  # noqa: B018  once per map: the exact checks below pass far poses
         self.step = float(step) if step is not None else max(PLACE_STEP, grid.resolution)
         if leg_rounds < 0:
             raise EcahdError(f"leg_rounds must be >= 0, got {leg_rounds}")

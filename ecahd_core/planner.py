@@ -484,9 +484,7 @@ class HierarchicalPlanner:
         self.replan = replan
         from ecahd_core.cost import CostConfig
         from ecahd_core.diffusion import DiffusionSampler, SamplerConfig
-        from ecahd_core.model_zoo import sample_steps
-
-        from ecahd_core.model_zoo import DEFAULT_DENSE_POINTS, dense_points
+        from ecahd_core.model_zoo import DEFAULT_DENSE_POINTS, dense_points, sample_steps
 
         self.sparse = sparse
         self.dense = dense or DenseConfig()

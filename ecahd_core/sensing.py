@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ecahd_core.errors import EcahdError
+from ecahd_core.errors import EcahdError, TrajectoryError
 from ecahd_core.local_costmap import LocalCostmap, LocalCostmapConfig
 from ecahd_core.maps import GridMap
 from ecahd_core.tracking import MotionTracker, TrackerConfig
@@ -175,7 +175,8 @@ class SeenObstacles:
 
 
 class StaticClearance:
-    """Is a pose clear of a GridMap? The exact checker's answer, fast far from walls.
+    """Is a pose clear of a GridMap? The exact checker's answer, fast far from walls
+    (``collision.far_passed_depths`` on the map's ``free_distance``, built on first use).
 
     Args:
         grid: the map (its ``occupied`` cells; beyond its edge counts as occupied).
@@ -183,42 +184,26 @@ class StaticClearance:
 
     def __init__(self, grid: GridMap) -> None:
         self.grid = grid
-        self._edt: np.ndarray | None = None  # (H+2, W+2) [m] distance transform, built lazily
 
     def depths(self, poses, footprint) -> np.ndarray:
         """(N, 3) poses -> (N,) the exact checker's overlap depth [m] of ``footprint`` with the
         map (<= 0 or -inf: free). A pose whose cell lies farther than the circumscribed radius
-        + 2 half cell diagonals from every occupied cell (the map's distance transform) is
-        free whatever its heading (-inf, a lookup's cost); the exact checker judges the rest
-        (near walls)."""
-        from ecahd_core.collision import pose_depths
+        + 2 half cell diagonals from every occupied cell is free whatever its heading (-inf, a
+        lookup's cost); the exact checker judges the rest (near walls)."""
+        from ecahd_core.collision import far_passed_depths
 
         poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
-        res = self.grid.resolution
-        near = self.wall_distance(poses[:, :2]) - math.sqrt(2.0) * res \
-            <= footprint.circumscribed_radius  # (N,)
-        out = np.full(len(poses), -np.inf)
-        if near.any():
-            out[near] = pose_depths(poses[near], footprint, self.grid)
-        return out
+        if not np.all(np.isfinite(poses)):
+            raise TrajectoryError("poses must be finite")
+        return far_passed_depths(poses, footprint, self.grid)
 
     def wall_distance(self, xy: np.ndarray) -> np.ndarray:
         """(N, 2) [m] -> (N,) [m] distance from each point's cell centre to the nearest
         occupied cell centre of the static map (off the map: 0; beyond the map's edge counts
         as occupied, as for the exact checker)."""
-        if self._edt is None:
-            import cv2
+        from ecahd_core.collision import wall_distance
 
-            free = np.pad(~self.grid.occupied, 1, constant_values=False).astype(np.uint8)
-            self._edt = cv2.distanceTransform(free, cv2.DIST_L2, cv2.DIST_MASK_PRECISE
-                                              ).astype(np.float32) * self.grid.resolution
-        rows, cols = self.grid.world_to_cell(xy)  # may lie off the map
-        rows, cols = np.asarray(rows) + 1, np.asarray(cols) + 1  # the padded frame
-        h, w = self._edt.shape
-        inside = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
-        out = np.zeros(len(xy))
-        out[inside] = self._edt[rows[inside], cols[inside]]
-        return out
+        return wall_distance(self.grid, np.asarray(xy, dtype=np.float64).reshape(-1, 2))
 
 
 def shuttle_bounds(points: np.ndarray, velocities: np.ndarray, trail: np.ndarray,

@@ -311,7 +311,6 @@ class LocalRefiner(Node):
 
         set_torch_threads(p.torch_threads)
         self.generator = torch.Generator().manual_seed(p.seed)
-        self.points = None  # P^l, the DD checkpoint's (DenseConfig.points) once a map arrives
         self.grid = None
         self.planner = None  # HierarchicalPlanner (its local stage only) once a map arrives
         self._lock = threading.Lock()  # the runner is shared by the callback threads
@@ -439,12 +438,11 @@ class LocalRefiner(Node):
                                shuttles=p.monitor_shuttles)
         with self._lock, self._world_lock:
             self.grid, self.planner, self.refiner, self.world = grid, planner, refiner, world
-            self.points = planner.dense.points
             self.runner.refine = refiner
             self.runner.reset_costs()  # the current plan's segments are refined on this map
         self.get_logger().info(f"map {grid.name!r} received; "
                                f"{'DD model and ' if p.dd_enabled else ''}cost J ready, "
-                               f"P^l={self.points}")
+                               f"P^l={planner.dense.points}")
 
     def _on_plan(self, msg: Path) -> None:
         p = self.params
