@@ -35,7 +35,7 @@ import numpy as np
 import torch
 
 from ecahd_core.errors import MapError, TrajectoryError
-from ecahd_core.maps import GridMap, signed_distance
+from ecahd_core.maps import FREE, OCCUPIED, GridMap, signed_distance
 
 DEFAULT_MARGIN = 0.1  # [m] distance from an obstacle at which the cost reaches 0
 DEFAULT_DILATION = 0.0  # [m] obstacle inflation (Table II "dilation"); 0 = the paper's Surface
@@ -265,3 +265,61 @@ class _BilinearLookup(torch.autograd.Function):
     def backward(ctx, grad_value: torch.Tensor):
         (grad_xy,) = ctx.saved_tensors
         return grad_value.unsqueeze(ctx.dim) * grad_xy, None, None
+
+
+def add_obstacles(base: CostMap, rows: np.ndarray, cols: np.ndarray, occupied_of, *,
+                  tile: int | None = None, name: str = "marks") -> CostMap:
+    """``base``'s cost with the cells (rows, cols) of its grid occupied as well: what
+    :meth:`CostMap.from_grid` would give for the occupancy ``base`` was built from plus those
+    cells, computed on the regions round them only.
+
+    The cost is a decreasing function of the distance to the nearest obstacle, so in free space
+    the cost of a union of obstacles is the larger of their costs: each region (the marks' cells
+    grown by the reach of an obstacle's cost, ``margin + dilation``) gets the cost of what is
+    occupied in it, with a free ring round it so its border is no wall, and the result is the
+    cell-wise maximum with ``base``. In free space this is the whole map's cost exactly (a test
+    compares); inside an obstacle the depth term is at least ``base``'s but can be lower than
+    the whole map's where a mark fills a gap of a wall that reaches past the region.
+
+    Args:
+        base: the cost map to add to (H, W).
+        rows, cols: (K,) int cells of ``base``'s grid to mark occupied; those off it are ignored.
+        occupied_of: (row slice, col slice) -> (h, w) bool, the occupancy ``base`` was built
+            from on that region of its grid.
+        tile: marks are grouped into square tiles of this many cells, each tile's region
+            computed on its own (marks spread over a big map: a few small regions instead of
+            one that spans the map); None: one region round all marks.
+
+    Returns:
+        A new CostMap (same extent, resolution, origin, margin, dilation, dtype and device;
+        named ``base.name + "+" + name``), or ``base`` itself when no mark lies on it.
+    """
+    rows, cols = np.asarray(rows, dtype=np.int64), np.asarray(cols, dtype=np.int64)
+    H, W = base.shape
+    on = (rows >= 0) & (rows < H) & (cols >= 0) & (cols < W)
+    rows, cols = rows[on], cols[on]
+    if not len(rows):
+        return base
+    pad = math.ceil((base.margin + base.dilation) / base.resolution) + 1  # [cells]
+    if tile is None:
+        groups = [np.arange(len(rows))]
+    else:
+        key = (rows // tile) * (-(-W // tile)) + cols // tile
+        order = np.argsort(key, kind="stable")
+        groups = np.split(order, np.flatnonzero(np.diff(key[order])) + 1)
+    fused = base.grid.clone()  # (H, W)
+    for g in groups:
+        r, c = rows[g], cols[g]
+        r_lo, r_hi = max(int(r.min()) - pad, 0), min(int(r.max()) + 1 + pad, H)
+        c_lo, c_hi = max(int(c.min()) - pad, 0), min(int(c.max()) + 1 + pad, W)
+        occ = np.array(occupied_of(slice(r_lo, r_hi), slice(c_lo, c_hi)), dtype=bool)
+        occ[r - r_lo, c - c_lo] = True
+        ring = np.pad(occ, pad, constant_values=False)
+        region = GridMap(data=np.where(ring, OCCUPIED, FREE).astype(np.int8),
+                         resolution=base.resolution, name="marks")
+        window = CostMap.from_grid(region, margin=base.margin, dilation=base.dilation,
+                                   dtype=base.dtype, device=base.device).grid[pad:-pad, pad:-pad]
+        patch = fused[r_lo:r_hi, c_lo:c_hi]  # a view: writing it writes ``fused``
+        patch.copy_(torch.maximum(patch, window))
+    return CostMap(fused, origin=base.origin, resolution=base.resolution, margin=base.margin,
+                   dilation=base.dilation, name=f"{base.name}+{name}")

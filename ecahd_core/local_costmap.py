@@ -38,10 +38,9 @@ import numbers
 from dataclasses import dataclass
 
 import numpy as np
-import torch
 
 from ecahd_core.cost import CostConfig
-from ecahd_core.costmap import CostMap
+from ecahd_core.costmap import CostMap, add_obstacles
 from ecahd_core.errors import EcahdError, MapError
 from ecahd_core.maps import FREE, OCCUPIED, UNKNOWN, GridMap, OccupancyGridLayout
 
@@ -399,35 +398,12 @@ class LocalCostmap:
         else:
             raise MapError(f"fused_costmap needs a GridMap or CostMap, got "
                            f"{type(static).__name__}")
-        H, W = base.shape
         d_row, d_col = self._lattice_offset(base)
         if self._row0 is None:  # no scan yet
             return base
         rows, cols = np.nonzero(self.obstacle_mask())  # (M,) window cells of the marks
         rows, cols = rows + self._row0 - d_row, cols + self._col0 - d_col  # static map cells
-        on_map = (rows >= 0) & (rows < H) & (cols >= 0) & (cols < W)
-        if not on_map.any():
-            return base
-        # the window, grown by the reach of an obstacle's cost, clipped to the static map
-        pad = math.ceil((base.margin + base.dilation) / self.resolution) + 1  # [cells]
-        n = self.cells
-        r0, c0 = self._row0 - d_row, self._col0 - d_col  # static cell of window cell (0, 0)
-        r_lo, r_hi = max(r0 - pad, 0), min(r0 + n + pad, H)
-        c_lo, c_hi = max(c0 - pad, 0), min(c0 + n + pad, W)
-        occ = np.array(occupied_of(slice(r_lo, r_hi), slice(c_lo, c_hi)), dtype=bool)
-        occ[rows[on_map] - r_lo, cols[on_map] - c_lo] = True
-        # cost of (static OR local) on the region, with a free ring of ``pad`` cells around it
-        # so the region's border is no wall (CostMap.from_grid treats off-map as obstacle)
-        ring = np.pad(occ, pad, constant_values=False)
-        region = GridMap(data=np.where(ring, OCCUPIED, FREE).astype(np.int8),
-                         resolution=self.resolution, name="local window")
-        window = CostMap.from_grid(region, margin=base.margin, dilation=base.dilation,
-                                   dtype=base.dtype, device=base.device).grid[pad:-pad, pad:-pad]
-        fused = base.grid.clone()  # (H, W)
-        patch = fused[r_lo:r_hi, c_lo:c_hi]  # a view: pasting writes into ``fused``
-        patch.copy_(torch.maximum(patch, window))
-        return CostMap(fused, origin=base.origin, resolution=base.resolution,
-                       margin=base.margin, dilation=base.dilation, name=f"{base.name}+local")
+        return add_obstacles(base, rows, cols, occupied_of, name="local")
 
     def _static_costmap(self, grid: GridMap, cfg: CostConfig) -> CostMap:
         """``grid``'s cost map with cfg's margin and dilation, built once and remembered."""

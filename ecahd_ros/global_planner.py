@@ -245,7 +245,7 @@ class GlobalPlanner(Node):
         self.create_subscription(String, "ecahd/replan", self._guard(self._on_replan),
                                  STREAM_QOS)
         self.memory = None  # ecahd_core.sensing.ObstacleMemory of the scanned obstacles
-        self._cost_cache = None  # (key of the fused grid, its J tuple)
+        self._static_cost = None  # J's tuple on the static map (collision-aware selection)
         self._placer_cache = None  # (key of the fused grid, its WaypointPlacer)
         self.fallbacks = 0  # A* fallbacks after repeated "blocked" replans
         # a goal coalesced in a burst is planned within one period even without odometry
@@ -305,7 +305,7 @@ class GlobalPlanner(Node):
         from ecahd_core.sensing import ObstacleMemory
 
         self.memory = ObstacleMemory(grid, p.obstacle_memory)
-        self._cost_cache = (None, sparse.cost) if sparse is not None else None
+        self._static_cost = sparse.cost if sparse is not None else None
         self._placer_cache = None  # a new map: a new distance transform
         self.get_logger().info(f"map {grid.name!r} received ({grid.width} x {grid.height} "
                                f"cells); {p.method} planner built")
@@ -420,15 +420,9 @@ class GlobalPlanner(Node):
         return self._placer_cache[1]
 
     def _fused_cost(self):
-        """J's (costmap, footprint points, config) on :meth:`_fused_grid`, rebuilt only when
-        the remembered obstacles changed."""
-        from ecahd_core.cost import CollisionCost
-
-        grid = self._fused_grid()
-        key = self._grid_key(grid)
-        if self._cost_cache is None or self._cost_cache[0] != key:
-            self._cost_cache = (key, CollisionCost.build(grid, self.footprint).as_tuple())
-        return self._cost_cache[1]
+        """J's (costmap, footprint points, config) on the static map and the remembered
+        obstacles (``ObstacleMemory.fused_cost``)."""
+        return self.memory.fused_cost(self._now(), self._static_cost)
 
     def _on_pending(self) -> None:
         if self.runner.pending:
@@ -507,18 +501,8 @@ class GlobalPlanner(Node):
         """Whether the straight legs of ``waypoints`` (P, 2) [m] sweep the footprint over an
         obstacle the scans found and the memory still holds (the static map's walls are DD's
         and polishing's business; a scanned blockage is not in what SD learnt)."""
-        from ecahd_core.collision import check_collision
-        from ecahd_core.maps import GridMap
-
-        if self.memory is None:
-            return False
-        mask = self.memory.mask(self._now())
-        if not mask.any():
-            return False
-        g = self.grid
-        only = GridMap(np.where(mask, 100, 0).astype(np.int8), g.resolution, g.origin,
-                       name=g.name, frame_id=g.frame_id)
-        return not check_collision(waypoints, self.judged, only).collision_free
+        return self.memory is not None and self.memory.crosses(waypoints, self.judged,
+                                                               self._now())
 
     def _plan_fallback(self, start: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, float]:
         """A* with the footprint's clearance on the static map fused with the local costmap

@@ -390,3 +390,63 @@ def test_planner_for_picks_the_coarse_search_on_big_maps_and_it_stands_in_everyw
     assert big.fine.path_is_clear(path)
     with pytest.raises(AttributeError):
         big.no_such_query
+
+
+def _window_clearance(planner, rows, cols):
+    """The brute-force reference of AStarPlanner._centre_clearance: hypot of the per-axis gaps
+    to every occupied square of the (2w + 1)^2 window, capped at w cells."""
+    w = planner._pad
+    dr, dc = np.meshgrid(np.arange(-w, w + 1), np.arange(-w, w + 1), indexing="ij")
+    dr, dc = dr.ravel(), dc.ravel()
+    gap = np.hypot(np.maximum(np.abs(dr) - 0.5, 0.0), np.maximum(np.abs(dc) - 0.5, 0.0))
+    occupied = planner._occupied_padded[rows[:, None] + w + dr, cols[:, None] + w + dc]
+    return np.where(occupied, gap, np.inf).min(axis=1, initial=float(w)) * planner.grid.resolution
+
+
+@pytest.mark.parametrize("density", [0.01, 0.05, 0.2])
+def test_separable_centre_clearance_equals_the_window_search(density):
+    rng = np.random.default_rng(int(density * 100))
+    occ = rng.random((70, 90)) < density
+    grid = GridMap(np.where(occ, 100, 0).astype(np.int8), 0.05, (0.0, 0.0), name="random")
+    planner = AStarPlanner(grid, 0.3)
+    rows, cols = np.nonzero(~occ)  # every free cell, near the threshold or not
+    np.testing.assert_array_equal(planner._centre_clearance(rows, cols),
+                                  _window_clearance(planner, rows, cols))
+
+
+def test_coarse_graph_equals_its_definition(office):
+    """Representatives: each node's cell nearest its centroid, row-major first on ties; edges:
+    node pairs adjacent across a block border, each once per direction."""
+    fine = AStarPlanner(office.grid, 0.4)
+    coarse = CoarseAStarPlanner(fine, 6, landmarks=0)
+    labels = coarse.labels
+    assert coarse._landmark_dist.shape == (0, coarse.num_nodes)
+    for node in np.random.default_rng(0).choice(coarse.num_nodes, 40, replace=False):
+        rows, cols = np.nonzero(labels == node)  # row-major
+        d2 = (rows - rows.mean()) ** 2 + (cols - cols.mean()) ** 2
+        k = int(np.argmin(d2))  # first minimum
+        assert tuple(coarse.rep_cells[node]) == (rows[k], cols[k])
+    edges = set()
+    H, W = labels.shape
+    for r in range(H):
+        for c in range(W):
+            a = labels[r, c]
+            if a < 0:
+                continue
+            if c + 1 < W and (c + 1) % 6 == 0 and labels[r, c + 1] >= 0:
+                edges.add((a, labels[r, c + 1]))
+            if r + 1 < H and (r + 1) % 6 == 0 and labels[r + 1, c] >= 0:
+                edges.add((a, labels[r + 1, c]))
+            if (r + 1) % 6 == 0 and (c + 1) % 6 == 0 and r + 1 < H and c + 1 < W and \
+                    fine.mask[r:r + 2, c:c + 2].all():
+                edges.add((a, labels[r + 1, c + 1]))
+                edges.add((labels[r, c + 1], labels[r + 1, c]))
+    edges |= {(b, a) for a, b in edges}
+    got = {(n, coarse._dst[j]) for n in range(coarse.num_nodes)
+           for j in range(coarse._indptr[n], coarse._indptr[n + 1])}
+    assert got == edges
+    # without landmarks the search still finds a path through the doors
+    a, b = office.anchors[0], office.anchors[-1]
+    path = coarse.plan(a, b)
+    assert fine.path_is_clear(path)
+    assert path_length(path) < 1.1 * path_length(fine.plan(a, b))

@@ -440,3 +440,77 @@ def test_a_cylinder_crossing_the_corridor_is_not_a_wall_in_the_local_costmap(mar
         assert min(cyl_cells) > 0
     else:
         assert cyl_cells[0] > 0 and max(cyl_cells[21:]) == 0, cyl_cells
+
+
+@pytest.fixture(scope="module")
+def small_office():
+    from ecahd_core.mapgen import MapGenConfig, generate
+
+    return generate(MapGenConfig("office", 16, 12, 0.05, 3))  # 76 800 cells: coarse A*
+
+
+def test_detour_on_a_big_grid_is_coarse_and_near_the_exact_one(small_office):
+    from ecahd_core.astar import COARSE_ABOVE_CELLS, path_length
+    from ecahd_core.collision import check_collision
+    from ecahd_core.footprint import make_footprint
+    from ecahd_core.navigation import detour
+    from ecahd_core.sensing import ObstacleMemory
+
+    grid, robot = small_office.grid, make_footprint("circle")
+    assert grid.height * grid.width > COARSE_ABOVE_CELLS
+    anchors = small_office.anchors
+    rng = np.random.default_rng(1)
+    ratios = []
+    for _ in range(6):
+        i, j = rng.choice(len(anchors), 2, replace=False)
+        exact = detour(grid, robot, anchors[i], anchors[j], coarse=False)
+        # a box remembered on the exact way's middle: both go round it, or neither can
+        memory = ObstacleMemory(grid)
+        from ecahd_core.bench.replan import _remember_boxes
+
+        _remember_boxes(memory, grid, exact[len(exact) // 2][None], 0.5, now=0.0)
+        fused = memory.fused(0.0)
+        assert memory.crosses(exact, robot, 0.0) == (
+            not check_collision(exact, robot, memory.fused(0.0)).collision_free)
+        try:
+            ref = detour(fused, robot, anchors[i], anchors[j], coarse=False)
+        except PlanningError:
+            with pytest.raises(PlanningError):
+                detour(fused, robot, anchors[i], anchors[j])
+            continue
+        path = detour(fused, robot, anchors[i], anchors[j])
+        np.testing.assert_array_equal(path[[0, -1]], anchors[[i, j]])
+        assert check_collision(path, robot, fused).collision_free
+        assert not memory.crosses(path, robot, 0.0)
+        ratios.append(path_length(path) / path_length(ref))
+    assert ratios and max(ratios) < 1.1
+
+
+@pytest.mark.parametrize("tile", [None, 16])
+def test_remembered_obstacles_in_j_equal_a_whole_new_cost_map_in_free_space(small_office, tile):
+    import torch
+
+    from ecahd_core.cost import CollisionCost
+    from ecahd_core.costmap import add_obstacles
+    from ecahd_core.footprint import make_footprint
+    from ecahd_core.sensing import ObstacleMemory
+
+    grid, robot = small_office.grid, make_footprint("circle")
+    static = CollisionCost.build(grid, robot).as_tuple()
+    memory = ObstacleMemory(grid)
+    assert memory.fused_cost(0.0, static) is static  # nothing remembered
+    from ecahd_core.bench.replan import _remember_boxes
+
+    # three boxes far apart (three tiles), one touching a wall
+    _remember_boxes(memory, grid, small_office.anchors[:3], 0.4, now=0.0)
+    fused = memory.fused(0.0)
+    whole = CollisionCost.build(fused, robot).costmap.grid
+    rows, cols = np.nonzero(fused.occupied & ~grid.occupied)
+    got = add_obstacles(static[0], rows, cols, lambda r, c: grid.occupied[r, c], tile=tile).grid
+    free = torch.as_tensor(~fused.occupied)
+    assert torch.equal(got[free], whole[free])
+    assert bool((got >= static[0].grid).all())  # never below the static cost
+    cached = memory.fused_cost(0.0, static)
+    assert memory.fused_cost(0.0, static) is cached  # kept until the marks change
+    assert torch.equal(cached[0].grid[free], whole[free])
+    assert cached[1] is static[1] and cached[2] is static[2]

@@ -4,6 +4,8 @@
     ecahd bench sampling [--json FILE]        SD / DD / FD latency next to the paper's figures
     ecahd bench sd-quality [--problems 128]   SD alone: goal reach, collision-free (point robot)
     ecahd bench contention [--quick]          plan latency quiet vs beside a CPU hog
+    ecahd bench replan [--map M]              global_planner's work round a plan with
+                                              remembered obstacles on a big map
 
 ``BENCHMARKS`` maps each name to its argument builder and runner; a new benchmark (sampling,
 planning, ...) is one more entry. Every benchmark takes ``--threads T`` (one definition,
@@ -20,6 +22,7 @@ from typing import Callable
 
 from ecahd_core.bench import contention as bench_contention
 from ecahd_core.bench import monitor as bench_monitor
+from ecahd_core.bench import replan as bench_replan
 from ecahd_core.bench.cost import CostBenchSettings
 from ecahd_core.errors import EcahdError
 from ecahd_core.threads import add_threads_argument, set_torch_threads
@@ -268,6 +271,10 @@ BENCHMARKS: dict[str, Benchmark] = {
     "contention": Benchmark(help="plan latency (SD best-of-10, Alg. 1 replan once) quiet and "
                                  "beside a CPU hog, with 1 torch thread and with every core",
                             add_arguments=bench_contention.add_arguments, run=_run_contention),
+    "replan": Benchmark(help="global_planner's work round a plan on a big map with remembered "
+                             "obstacles (fused cost, crossing check, detour) against the "
+                             "previous way, in one run",
+                        add_arguments=bench_replan.add_arguments, run=bench_replan.run),
 }
 
 
