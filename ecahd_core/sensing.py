@@ -27,6 +27,7 @@ MOVER_GAP = 0.3  # [m] ... "near": the tracker's cluster gap
 SHUTTLE_MEMORY = 12.0  # [s] moving returns kept to find where a mover turns round
 SHUTTLE_POINTS = 16  # at most this many moving returns of a scan are kept for that
 MEMORY_TILE = 128  # [cells] remembered obstacles are added to J's cost map tile by tile
+RECENT_OBSTACLES = 2.0  # [s] a detour that the whole memory blocks tries what was seen lately
 
 
 @dataclass(frozen=True)
@@ -481,6 +482,27 @@ class ObstacleMemory:
                                     tile=MEMORY_TILE, name="remembered")
             self._cost_cache = (key, (costmap, points, config))
         return self._cost_cache[1]
+
+    def detour(self, footprint, start, goal, now: float) -> tuple[np.ndarray, int]:
+        """A path round what is known (``navigation.detour``): on the static map with every
+        remembered cell, else with only those marked in the last ``RECENT_OBSTACLES`` s (a
+        moving obstacle's trail in the memory can close every way). Never the static map
+        alone: a path through what the scans see now is not given.
+
+        Returns (path (N, 2) [m], how many of the two maps were tried). Raises PlanningError
+        naming both when neither holds a way."""
+        from ecahd_core.errors import PlanningError
+        from ecahd_core.navigation import detour
+
+        grids = (self.fused(now), self.fused(now, within=RECENT_OBSTACLES))
+        for i, grid in enumerate(grids):
+            try:
+                return detour(grid, footprint, start, goal), i + 1
+            except PlanningError as exc:
+                if i == len(grids) - 1:
+                    raise PlanningError(f"no way round the obstacles the scans found (also "
+                                        f"with only those of the last {RECENT_OBSTACLES:g} s): "
+                                        f"{exc}") from None
 
     def crosses(self, path, footprint, now: float) -> bool:
         """Whether the footprint swept along the straight legs of ``path`` (P, 2) [m] meets a

@@ -85,7 +85,6 @@ from ecahd_ros.spin import spin_node
 
 METHODS = ("sd", "astar", "fd")  # ECAHD's Sparse Diffusion; the Table III baselines' planners
 ASTAR_SPACING = 0.25  # [m] most distance between consecutive points of a published A* path
-RECENT_OBSTACLES = 2.0  # [s] a detour that the whole memory blocks tries what was seen lately
 
 PARAMETERS = [
     ParamSpec("method", "sd", f"global planner: {list(METHODS)} (sd: ECAHD, replanned at each "
@@ -505,34 +504,22 @@ class GlobalPlanner(Node):
                                                                self._now())
 
     def _plan_fallback(self, start: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, float]:
-        """A* with the footprint's clearance on the static map fused with the local costmap
-        (a detour round a scanned blockage), from the nearest pose with clearance."""
+        """A* with the footprint's clearance round the remembered obstacles
+        (``ObstacleMemory.detour``), resampled -> (path (N, 2) [m], wall time [ms])."""
         from ecahd_core.controller import resample
-        from ecahd_core.navigation import detour
 
         t0 = time.perf_counter()
         now = self._now()
-        # what is remembered, else only what was seen lately (a moving obstacle's trail in the
-        # memory can close every way). Never the static map alone: a path through what the
-        # scans see now is not published; the refiner stays stopped and asks again.
-        grids = [self.memory.fused(now), self.memory.fused(now, within=RECENT_OBSTACLES)] \
-            if self.memory is not None else [self.grid]
-        for i, grid in enumerate(grids):
-            try:
-                path = detour(grid, self.judged, start, goal)
-                break
-            except PlanningError as exc:
-                if i == len(grids) - 1:
-                    raise PlanningError(f"no way round the obstacles the scans found (also "
-                                        f"with only those of the last {RECENT_OBSTACLES:g} s): "
-                                        f"{exc}; the robot waits for a way to open") from None
+        try:
+            path, tried = self.memory.detour(self.judged, start, goal, now)
+        except PlanningError as exc:
+            raise PlanningError(f"{exc}; the robot waits for a way to open") from None
         path = resample(path, ASTAR_SPACING)
         self.fallbacks += 1
-        remembered = int(self.memory.mask(now).sum()) if self.memory is not None else 0
         self.get_logger().warning(
             f"replan after {self.runner.blocked_count} blocked segment(s): fallback to A* on "
-            f"the map with {remembered} remembered obstacle cells, tried {i + 1} of "
-            f"{len(grids)} maps ({self.fallbacks} fallback(s) so far)")
+            f"the map with {int(self.memory.mask(now).sum())} remembered obstacle cells, "
+            f"tried {tried} of 2 maps ({self.fallbacks} fallback(s) so far)")
         return path, (time.perf_counter() - t0) * 1e3
 
     def _plan_astar(self, start: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, float]:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import sys
 import time
 
 import numpy as np
@@ -27,6 +28,7 @@ def main() -> None:
     args = ap.parse_args()
     spec = importlib.util.spec_from_file_location("astar_other", args.other)
     other = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = other  # its dataclasses look their module up
     spec.loader.exec_module(other)
     grid = load_map(args.map)
     print(f"map {grid.name!r}: {grid.width} x {grid.height} cells at {grid.resolution} m; "

@@ -514,3 +514,33 @@ def test_remembered_obstacles_in_j_equal_a_whole_new_cost_map_in_free_space(smal
     assert memory.fused_cost(0.0, static) is cached  # kept until the marks change
     assert torch.equal(cached[0].grid[free], whole[free])
     assert cached[1] is static[1] and cached[2] is static[2]
+
+
+def test_memory_detour_tries_what_was_seen_lately_when_the_whole_memory_closes_every_way():
+    from ecahd_core.footprint import make_footprint
+    from ecahd_core.maps import GridMap
+    from ecahd_core.sensing import RECENT_OBSTACLES, ObstacleMemory
+
+    grid, robot = two_corridor_map(), make_footprint("circle")
+    start, goal = (0.5, 0.75), (5.5, 0.75)
+
+    def marks(*columns):  # walls across the corridors at these columns (window = whole map)
+        data = np.full(grid.data.shape, -1, dtype=np.int8)
+        for c in columns:
+            data[:, c] = 100
+        return GridMap(data, grid.resolution, grid.origin, unknown_is_occupied=False)
+
+    memory = ObstacleMemory(grid, persistence=60.0)
+    memory.update(marks(30), now=0.0)  # long ago: both corridors closed at x = 3
+    with pytest.raises(PlanningError):
+        memory.detour(robot, start, goal, now=1.0)  # seen lately too: no way
+    now = 10.0
+    data = np.full(grid.data.shape, -1, dtype=np.int8)
+    data[:15, 40] = 100  # lately: the bottom corridor closed at x = 4 (the trail is older)
+    memory.update(GridMap(data, grid.resolution, grid.origin, unknown_is_occupied=False),
+                  now=now - 0.5 * RECENT_OBSTACLES)
+    path, tried = memory.detour(robot, start, goal, now=now)
+    assert tried == 2 and path[:, 1].max() > 2.5  # round the recent mark, through the top
+    memory.update(marks(35), now=now)  # now both closed lately too
+    with pytest.raises(PlanningError, match="no way round the obstacles the scans found"):
+        memory.detour(robot, start, goal, now=now)
