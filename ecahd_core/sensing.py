@@ -152,9 +152,41 @@ def fuse_grid(static: GridMap, mask: np.ndarray, origin: tuple[float, float]) ->
     data = static.data.copy()
     sub = mask[rs - r0:re - r0, cs - c0:ce - c0]
     data[rs:re, cs:ce][sub] = 100
-    return GridMap(data, static.resolution, static.origin, name=static.name,
-                   frame_id=static.frame_id, unknown_is_occupied=static.unknown_is_occupied,
-                   occupied_threshold=static.occupied_threshold)
+    fused = GridMap(data, static.resolution, static.origin, name=static.name,
+                    frame_id=static.frame_id, unknown_is_occupied=static.unknown_is_occupied,
+                    occupied_threshold=static.occupied_threshold)
+    rows, cols = np.nonzero(sub)
+    if len(rows):
+        fused.__dict__["free_distance"] = _fused_free_distance(static, rows + rs, cols + cs)
+    return fused
+
+
+FUSED_DISTANCE_REACH = 2.0  # [m] beyond the marks' box, fused distances are capped (below)
+
+
+def _fused_free_distance(static: GridMap, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """A lower bound of the fused grid's ``free_distance`` (static map + the marked cells
+    (rows, cols) (K,)), for the exact checker's far-pose pass, in a few ms instead of a
+    distance transform of the whole map (~80 ms on 2000 x 2000 cells): the static map's
+    (computed once per map) and, in the marks' box grown by ``FUSED_DISTANCE_REACH`` cells,
+    the exact distance to the marks; outside that box the marks are at least that far, so the
+    distance is capped there (a footprint reaching farther than that gets every pose tested). A lower bound only makes the checker test more poses cell by
+    cell (a pose is passed only when it is farther from every occupied cell than its
+    footprint reaches), so its verdicts stay exact."""
+    import cv2
+
+    g = int(math.ceil(FUSED_DISTANCE_REACH / static.resolution))  # [cells]
+    H, W = static.height, static.width
+    r_lo, r_hi = max(int(rows.min()) - g, 0), min(int(rows.max()) + 1 + g, H)
+    c_lo, c_hi = max(int(cols.min()) - g, 0), min(int(cols.max()) + 1 + g, W)
+    free = np.ones((r_hi - r_lo, c_hi - c_lo), dtype=np.uint8)
+    free[rows - r_lo, cols - c_lo] = 0
+    marks = cv2.distanceTransform(free, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    dist = np.minimum(static.free_distance, np.float32(g * static.resolution))
+    box = dist[r_lo:r_hi, c_lo:c_hi]
+    np.minimum(box, (marks * static.resolution).astype(np.float32), out=box)
+    dist.setflags(write=False)
+    return dist
 
 
 @dataclass(frozen=True)

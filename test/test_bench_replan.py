@@ -20,6 +20,7 @@ def test_bench_replan_measures_and_its_references_agree(tmp_path, capsys):
     assert len(data["records"]) == 2
     for r in data["records"]:
         assert r["cost_max_diff"] == 0.0 and r["crosses_agree"] and r["detour_agree"]
+        assert r["judge_agree"] and r["judge_ms"] > 0
         assert r["remembered_cells"] > 0 and r["crosses"]  # the boxes lie on the route
         if r["detour_m"] is not None:
             assert r["detour_m"] < 1.1 * r["detour_ref_m"]

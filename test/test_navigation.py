@@ -544,3 +544,41 @@ def test_memory_detour_tries_what_was_seen_lately_when_the_whole_memory_closes_e
     memory.update(marks(35), now=now)  # now both closed lately too
     with pytest.raises(PlanningError, match="no way round the obstacles the scans found"):
         memory.detour(robot, start, goal, now=now)
+
+
+def test_a_fused_grid_gets_a_distance_bound_that_keeps_the_checker_exact(small_office):
+    """fuse_grid derives the fused grid's free_distance from the static map's and the marks'
+    (a lower bound); the exact checker's verdicts, depths and first contacts stay those of a
+    check that tests every pose."""
+    from ecahd_core import collision
+    from ecahd_core.footprint import make_footprint
+    from ecahd_core.sensing import fuse_grid
+
+    grid = small_office.grid
+    rng = np.random.default_rng(3)
+    mask = np.zeros((80, 80), dtype=bool)
+    mask[30:38, 20:60] = True  # a wall of boxes across a 4 x 4 m window
+    mask[rng.integers(0, 80, 40), rng.integers(0, 80, 40)] = True  # and speckle
+    anchors = small_office.anchors
+    origin = tuple(anchors[0] - 2.0 - np.mod(anchors[0] - 2.0, grid.resolution))
+    fused = fuse_grid(grid, mask, origin)
+    assert "free_distance" in fused.__dict__  # derived, not a whole-map transform
+    exact = np.pad(~fused.occupied, 1).astype(np.uint8)
+    import cv2
+
+    true = cv2.distanceTransform(exact, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)[1:-1, 1:-1] \
+        * grid.resolution
+    assert np.all(fused.free_distance <= true + 1e-5)  # a lower bound everywhere
+    hits = []
+    for robot in ("circle", "quadruped"):
+        fp = make_footprint(robot)
+        for _ in range(8):
+            a = anchors[0] + rng.uniform(-3, 3, 2)
+            b = anchors[rng.integers(len(anchors))]
+            path = np.stack([a, b])
+            fast = collision.check_collision(path, fp, fused)
+            poses = fast.dense_poses
+            slow = collision._pose_depths(poses, fp, fused) > collision.DEFAULT_TOLERANCE
+            np.testing.assert_array_equal(fast.colliding, slow)
+            hits.append(bool(slow.any()))
+    assert any(hits) and not all(hits)

@@ -10,6 +10,11 @@ in the same run on the same problems:
 - ``crosses``: whether a plan's legs meet a remembered obstacle (``ObstacleMemory.crosses``:
   the exact checker on the marks with their distance transform). Reference: the exact checker
   on the marks without it. The verdicts must agree.
+- ``judge``: local_refiner's exact check of a local plan on the static map fused with a scan
+  window (``sensing.fuse_grid``, which derives the fused grid's distance bound from the static
+  map's, so the checker passes poses far from every wall and mark), for the 6 m of the route
+  round the first box, fusion included. Reference: the same check on the fused grid without
+  the bound (every pose tested cell by cell, as before). The verdicts must agree.
 - ``detour``: the A* detour round what is known (``navigation.detour``: coarse A* on a big map,
   no landmarks, no box search when the box holds most of the map). Reference: the same with the
   exact A* (``coarse=False``). Also reported: the detour's length against the exact one's.
@@ -88,6 +93,9 @@ class ProblemRecord:
     crosses_ms: float
     crosses_ref_ms: float
     crosses_agree: bool
+    judge_ms: float
+    judge_ref_ms: float
+    judge_agree: bool
     detour_ms: float | None  # None: no detour exists (both agree, else detour_agree False)
     detour_ref_ms: float | None
     detour_m: float | None
@@ -232,6 +240,30 @@ def run_replan_benchmark(settings: ReplanBenchSettings = ReplanBenchSettings(), 
         only = GridMap(np.where(mask, 100, 0).astype(np.int8), grid.resolution, grid.origin)
         crosses_ref_ms, report = _median_ms(lambda: check_collision(route, footprint, only), 1)
         crosses_ref = not report.collision_free
+        # local_refiner: fuse a 6 m window round the first box, judge 6 m of the route there
+        if s.obstacles:
+            from ecahd_core.sensing import fuse_grid
+
+            dense = resample(route, grid.resolution)
+            k = int(round((len(dense) - 1) / (s.obstacles + 1)))
+            segment = dense[max(k - int(3 / grid.resolution), 0):
+                            k + int(3 / grid.resolution) + 1]
+            r0, c0 = (int(v) - 100 for v in grid.world_to_cell(dense[k]))
+            window = mask[max(r0, 0):r0 + 200, max(c0, 0):c0 + 200]
+            w_origin = tuple(np.asarray(grid.origin) + grid.resolution
+                             * np.array([max(c0, 0), max(r0, 0)]))
+
+            def judge(bound: bool):
+                g = fuse_grid(grid, window, w_origin)
+                if not bound:
+                    g.__dict__.pop("free_distance", None)
+                return check_collision(segment, footprint, g).collision_free
+            grid.free_distance  # noqa: B018  once per map, as the refiner's static map has it
+            judge_ms, verdict = _median_ms(lambda: judge(True), s.repeats)
+            judge_ref_ms, verdict_ref = _median_ms(lambda: judge(False), 1)
+        else:
+            judge_ms = judge_ref_ms = 0.0
+            verdict = verdict_ref = True
         # detour round the remembered boxes
         detour_ms, path = _timed_detour(fused, footprint, start, goal, True, s.repeats)
         detour_ref_ms, path_ref = _timed_detour(fused, footprint, start, goal, False, 1)
@@ -240,6 +272,7 @@ def run_replan_benchmark(settings: ReplanBenchSettings = ReplanBenchSettings(), 
             remembered_cells=int(mask.sum()), cost_ms=cost_ms, cost_ref_ms=cost_ref_ms,
             cost_max_diff=diff, crosses=bool(crosses), crosses_ms=crosses_ms,
             crosses_ref_ms=crosses_ref_ms, crosses_agree=bool(crosses) == crosses_ref,
+            judge_ms=judge_ms, judge_ref_ms=judge_ref_ms, judge_agree=verdict == verdict_ref,
             detour_ms=detour_ms if path is not None else None,
             detour_ref_ms=detour_ref_ms if path_ref is not None else None,
             detour_m=path_length(path) if path is not None else None,
@@ -261,7 +294,7 @@ def format_table(result: ReplanBenchResult) -> str:
         f"{s.obstacles} box(es) of {s.box:g} m on each route; {m['cpu']}, "
         f"{m['logical_cpus']} CPUs, {m['torch_threads']} torch thread(s)",
         f"{'#':>2}{'route m':>9}{'cost ms':>9}{'(ref)':>8}{'crosses':>9}{'ms':>7}{'(ref)':>8}"
-        f"{'detour ms':>11}{'(ref)':>9}{'len / ref':>11}",
+        f"{'judge ms':>10}{'(ref)':>8}{'detour ms':>11}{'(ref)':>9}{'len / ref':>11}",
     ]
     for i, p in enumerate(r.records):
         if p.detour_m is not None and p.detour_ref_m is not None:
@@ -271,9 +304,10 @@ def format_table(result: ReplanBenchResult) -> str:
         det = "-" if p.detour_ms is None else f"{p.detour_ms:.0f}"
         det_ref = "-" if p.detour_ref_ms is None else f"{p.detour_ref_ms:.0f}"
         verdict = ("yes" if p.crosses else "no") + ("" if p.crosses_agree else "!")
+        judge = f"{p.judge_ms:.1f}" + ("" if p.judge_agree else "!")
         lines.append(f"{i:>2}{p.route_m:>9.1f}{p.cost_ms:>9.1f}{p.cost_ref_ms:>8.0f}"
-                     f"{verdict:>9}{p.crosses_ms:>7.1f}{p.crosses_ref_ms:>8.0f}{det:>11}"
-                     f"{det_ref:>9}{length:>11}")
+                     f"{verdict:>9}{p.crosses_ms:>7.1f}{p.crosses_ref_ms:>8.0f}{judge:>10}"
+                     f"{p.judge_ref_ms:>8.0f}{det:>11}{det_ref:>9}{length:>11}")
 
     def summary(label, new, ref):
         a, b, q = r.median(new), r.median(ref), r.ratio(new, ref)
@@ -282,16 +316,17 @@ def format_table(result: ReplanBenchResult) -> str:
         return f"{label:<14} {a:8.1f} ms   reference {b:8.1f} ms   reference / new {q:6.1f}x"
     lines += ["medians:", summary("fused cost", "cost_ms", "cost_ref_ms"),
               summary("crosses", "crosses_ms", "crosses_ref_ms"),
+              summary("judge", "judge_ms", "judge_ref_ms"),
               summary("detour", "detour_ms", "detour_ref_ms")]
     diff = max(p.cost_max_diff for p in r.records)
-    agree = all(p.crosses_agree and p.detour_agree for p in r.records)
+    agree = all(p.crosses_agree and p.judge_agree and p.detour_agree for p in r.records)
     lengths = [p.detour_m / p.detour_ref_m for p in r.records
                if p.detour_m is not None and p.detour_ref_m is not None]
     lines.append(f"largest cost difference in free space {diff:.2e}; verdicts agree: {agree}; detour length "
                  f"/ exact A*'s: " + (f"mean {np.mean(lengths):.3f}, worst {max(lengths):.3f}"
                                      if lengths else "-"))
     lines.append("references: a whole cost map from the fused grid; the exact checker without "
-                 "a distance transform; the detour by exact A*")
+                 "a distance transform (crosses, judge); the detour by exact A*")
     return "\n".join(lines)
 
 
