@@ -102,12 +102,12 @@ class CostMap:
 
     def _build_lookup(self) -> None:
         """Precompute what :meth:`sample` needs, on the grid's device and dtype."""
-        g = self.grid
-        H, W = g.shape
+        H, W = self.grid.shape
         # Eq. 10 neighbours of every cell centre (row i, col j), one table row per cell:
         # M(x0, y0), M(x1, y0), M(x0, y1), M(x1, y1) with x1 = col j + 1, y1 = row i + 1.
         # The last row / column is repeated, so a point clamped onto the upper border still finds
         # four neighbours (its weight on the repeated ones is 0).
+        g = self.grid
         padded = torch.cat([g, g[:, -1:]], dim=1)
         padded = torch.cat([padded, padded[-1:]], dim=0)  # (H + 1, W + 1)
         corners = torch.stack([padded[:-1, :-1], padded[:-1, 1:], padded[1:, :-1], padded[1:, 1:]])
@@ -115,6 +115,39 @@ class CostMap:
         # world position [m] of the centre of cell (0, 0): continuous index = (xy - centre0) / res
         self._centre0 = (self.origin[0] + 0.5 * self.resolution,
                          self.origin[1] + 0.5 * self.resolution)
+
+    @staticmethod
+    def _corner_block(g: torch.Tensor, r0: int, r1: int, c0: int, c1: int) -> torch.Tensor:
+        """The lookup table's four corner values of cells rows r0..r1-1, cols c0..c1-1 of the
+        cost grid g (H, W) -> (4, r1 - r0, c1 - c0), the last row / column repeated (what
+        :meth:`_build_lookup` computes for the whole grid)."""
+        H, W = g.shape
+        rows = torch.arange(r0, r1 + 1, device=g.device).clamp_(max=H - 1)
+        cols = torch.arange(c0, c1 + 1, device=g.device).clamp_(max=W - 1)
+        padded = g[rows][:, cols]  # (r1 - r0 + 1, c1 - c0 + 1)
+        return torch.stack([padded[:-1, :-1], padded[:-1, 1:], padded[1:, :-1], padded[1:, 1:]])
+
+    def _patched(self, grid: torch.Tensor, boxes: list[tuple[int, int, int, int]],
+                 name: str) -> CostMap:
+        """A CostMap of ``grid`` (H, W), which equals this one's but in the (r0, r1, c0, c1)
+        ``boxes`` (finite there): this one's lookup table copied and recomputed in the boxes
+        only, instead of built over the whole map (on 2000 x 2000 cells, the table is 4 x 4 M
+        values)."""
+        H, W = self.shape
+        for r0, r1, c0, c1 in boxes:
+            if not bool(torch.isfinite(grid[r0:r1, c0:c1]).all()):
+                raise MapError(f"cost map {name!r}: grid has non-finite values")
+        out = CostMap.__new__(CostMap)
+        out.grid, out.origin, out.resolution = grid, self.origin, self.resolution
+        out.margin, out.dilation, out.name = self.margin, self.dilation, name
+        out._converted = {}
+        out._centre0 = self._centre0
+        corners = self._corners.clone().view(4, H, W)
+        for r0, r1, c0, c1 in boxes:  # a cell's corners read its row and column + 1
+            r0, c0 = max(r0 - 1, 0), max(c0 - 1, 0)
+            corners[:, r0:r1, c0:c1] = self._corner_block(grid, r0, r1, c0, c1)
+        out._corners = corners.view(4, H * W)
+        return out
 
     # ------------------------------------------------------------------------------ access
     @property
@@ -308,6 +341,7 @@ def add_obstacles(base: CostMap, rows: np.ndarray, cols: np.ndarray, occupied_of
         order = np.argsort(key, kind="stable")
         groups = np.split(order, np.flatnonzero(np.diff(key[order])) + 1)
     fused = base.grid.clone()  # (H, W)
+    boxes = []
     for g in groups:
         r, c = rows[g], cols[g]
         r_lo, r_hi = max(int(r.min()) - pad, 0), min(int(r.max()) + 1 + pad, H)
@@ -321,5 +355,5 @@ def add_obstacles(base: CostMap, rows: np.ndarray, cols: np.ndarray, occupied_of
                                    dtype=base.dtype, device=base.device).grid[pad:-pad, pad:-pad]
         patch = fused[r_lo:r_hi, c_lo:c_hi]  # a view: writing it writes ``fused``
         patch.copy_(torch.maximum(patch, window))
-    return CostMap(fused, origin=base.origin, resolution=base.resolution, margin=base.margin,
-                   dilation=base.dilation, name=f"{base.name}+{name}")
+        boxes.append((r_lo, r_hi, c_lo, c_hi))
+    return base._patched(fused, boxes, f"{base.name}+{name}")

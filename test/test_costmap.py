@@ -177,3 +177,24 @@ def test_bad_parameters_and_points():
         CostMap(torch.tensor([[float("nan")]]), origin=(0, 0), resolution=0.1)
     with pytest.raises(TrajectoryError, match="pair"):
         tiny_map().sample(torch.zeros(4, 3, dtype=torch.float64))
+
+
+def test_a_cost_map_with_added_obstacles_has_the_lookup_of_one_built_whole():
+    """add_obstacles patches the base's bilinear lookup table in the regions it changed; it
+    must equal the table of a cost map built from the same grid, borders included."""
+    from ecahd_core.costmap import add_obstacles
+
+    occ = np.zeros((60, 50), dtype=bool)
+    occ[20:40, 0] = True
+    base = CostMap.from_grid(GridMap(np.where(occ, 100, 0).astype(np.int8), 0.05, (1.0, -2.0)))
+    rows, cols = np.array([0, 1, 59, 30, 45, 59]), np.array([0, 1, 49, 25, 3, 0])
+    for tile in (None, 8):
+        fused = add_obstacles(base, rows, cols, lambda r, c: occ[r, c], tile=tile)
+        whole = CostMap(fused.grid.clone(), origin=fused.origin, resolution=fused.resolution,
+                        margin=fused.margin, dilation=fused.dilation)
+        assert torch.equal(fused._corners, whole._corners)
+        xy = torch.rand(500, 2, generator=torch.Generator().manual_seed(0)) * torch.tensor([2.6, 3.2]) \
+            + torch.tensor([0.9, -2.1])  # on and off the map
+        assert torch.equal(fused.sample(xy), whole.sample(xy))
+    assert torch.equal(base._corners, CostMap(base.grid.clone(), origin=base.origin,
+                                              resolution=base.resolution)._corners)  # untouched
