@@ -655,7 +655,7 @@ def _depot(cv: _Canvas) -> None:
     """Open floor, pillar grid, shelf-block pairs, pallets, a wall rack row."""
     rng = cv.rng
     ix0, iy0, ix1, iy1, _ = cv.hull()
-    iw, ih = ix1 - ix0, iy1 - iy0
+    ih = iy1 - iy0
 
     # 1. rack row along the low-x wall (0-0.5 m off it), with an aisle in front
     rack = rng.uniform(0.9, 1.2)

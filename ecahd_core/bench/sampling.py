@@ -21,8 +21,6 @@ import statistics
 import time
 from dataclasses import asdict, dataclass, field
 
-import numpy as np
-
 from ecahd_core.bench.timing import median_ms
 
 log = logging.getLogger(__name__)
@@ -117,7 +115,6 @@ def run_sampling_benchmark(settings: SamplingBenchSettings, *, models: dict | No
                  for name, sdp in planners.items()}
 
     # DD for all 9 segments of one plan: local start t^g[p], local goal t^g[p+1]
-    plan = torch.tensor(problem.astar_path, dtype=torch.float32)
     from ecahd_core.dataset import resample_by_arclength
     wp = torch.tensor(resample_by_arclength(problem.astar_path, 10), dtype=torch.float32)
     seg_start, seg_goal = wp[:-1], wp[1:]  # (9, 2)
