@@ -168,11 +168,12 @@ def _fused_free_distance(static: GridMap, rows: np.ndarray, cols: np.ndarray) ->
     """A lower bound of the fused grid's ``free_distance`` (static map + the marked cells
     (rows, cols) (K,)), for the exact checker's far-pose pass, in a few ms instead of a
     distance transform of the whole map (~80 ms on 2000 x 2000 cells): the static map's
-    (computed once per map) and, in the marks' box grown by ``FUSED_DISTANCE_REACH`` cells,
-    the exact distance to the marks; outside that box the marks are at least that far, so the
-    distance is capped there (a footprint reaching farther than that gets every pose tested). A lower bound only makes the checker test more poses cell by
-    cell (a pose is passed only when it is farther from every occupied cell than its
-    footprint reaches), so its verdicts stay exact."""
+    (computed once per map) and, in the marks' box grown by ``FUSED_DISTANCE_REACH`` m, the
+    exact distance to the marks; outside that box the marks are at least that far, so the
+    distance is capped there (a footprint reaching farther gets every pose tested). A lower
+    bound only makes the checker test more poses cell by cell (a pose is passed only when it
+    is farther from every occupied cell than its footprint reaches), so its verdicts stay
+    exact."""
     import cv2
 
     g = int(math.ceil(FUSED_DISTANCE_REACH / static.resolution))  # [cells]
@@ -498,8 +499,9 @@ class ObstacleMemory:
         """J's (costmap, footprint points, config) with the remembered cells as obstacles:
         ``static_cost`` (built on :attr:`grid`) with them added on the tiles of
         ``MEMORY_TILE`` cells that hold them (``costmap.add_obstacles``; in free space the
-        same cost as a cost map built from :meth:`fused`, 3-4x faster on a 2000 x 2000 map,
-        ``ecahd bench replan``), kept until the remembered cells change. ``static_cost`` itself when nothing is remembered."""
+        same cost as a cost map built from :meth:`fused`, 2-3x faster on a 2000 x 2000 map,
+        ``ecahd bench replan``), kept until the remembered cells change; ``static_cost``
+        itself when nothing is remembered."""
         from ecahd_core.costmap import add_obstacles
 
         mask = self.mask(now) & ~self.grid.occupied  # remembered, not on the map

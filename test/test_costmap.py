@@ -193,8 +193,8 @@ def test_a_cost_map_with_added_obstacles_has_the_lookup_of_one_built_whole():
         whole = CostMap(fused.grid.clone(), origin=fused.origin, resolution=fused.resolution,
                         margin=fused.margin, dilation=fused.dilation)
         assert torch.equal(fused._corners, whole._corners)
-        xy = torch.rand(500, 2, generator=torch.Generator().manual_seed(0)) * torch.tensor([2.6, 3.2]) \
-            + torch.tensor([0.9, -2.1])  # on and off the map
+        unit = torch.rand(500, 2, generator=torch.Generator().manual_seed(0))
+        xy = unit * torch.tensor([2.6, 3.2]) + torch.tensor([0.9, -2.1])  # on and off the map
         assert torch.equal(fused.sample(xy), whole.sample(xy))
     assert torch.equal(base._corners, CostMap(base.grid.clone(), origin=base.origin,
                                               resolution=base.resolution)._corners)  # untouched

@@ -322,9 +322,9 @@ def format_table(result: ReplanBenchResult) -> str:
     agree = all(p.crosses_agree and p.judge_agree and p.detour_agree for p in r.records)
     lengths = [p.detour_m / p.detour_ref_m for p in r.records
                if p.detour_m is not None and p.detour_ref_m is not None]
-    lines.append(f"largest cost difference in free space {diff:.2e}; verdicts agree: {agree}; detour length "
-                 f"/ exact A*'s: " + (f"mean {np.mean(lengths):.3f}, worst {max(lengths):.3f}"
-                                     if lengths else "-"))
+    lines.append(f"largest cost difference in free space {diff:.2e}; verdicts agree: {agree}; "
+                 f"detour length / exact A*'s: "
+                 + (f"mean {np.mean(lengths):.3f}, worst {max(lengths):.3f}" if lengths else "-"))
     lines.append("references: a whole cost map from the fused grid; the exact checker without "
                  "a distance transform (crosses, judge); the detour by exact A*")
     return "\n".join(lines)
