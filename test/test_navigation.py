@@ -32,6 +32,23 @@ def test_goal_then_waypoints_shrink_the_horizon():
     assert r.step((1.95, 1.0), 0.4) is None
 
 
+def test_a_waypoint_at_the_start_does_not_count_as_reached():
+    """Leg repair can put a waypoint within waypoint_tolerance of the robot in every plan; it
+    must not ask for the next plan from the same pose (a storm of plans at the planning rate,
+    seen on the office)."""
+    r = GlobalRunner(GlobalRunnerConfig(horizon=2, waypoint_tolerance=0.3))
+    r.set_goal((3.0, 0.0))
+    assert r.step((0.0, 0.0), 0.0).reason == "goal"
+    plan = np.array([[0.0, 0.0], [0.1, 0.1], [0.2, -0.1], [1.5, 0.0], [3.0, 0.0]])
+    r.accept(plan, 0.0)
+    for t in (0.05, 0.1, 0.15):  # standing at the start, beside two such waypoints
+        assert r.step((0.05, 0.0), t) is None
+    assert r.step((1.4, 0.0), 1.0).reason == "waypoint"  # the first beyond them
+    r.accept(np.array([[1.4, 0.0], [1.5, 0.2], [3.0, 0.0]]), 1.0)  # only such a waypoint
+    assert r.step((1.4, 0.0), 1.05) is None
+    assert r.step((2.9, 0.0), 1.5) == "reached"
+
+
 def test_replan_once_and_timeout():
     once = GlobalRunner(GlobalRunnerConfig(replan="once", replan_timeout=0.0))
     once.set_goal((2.0, 1.0))
