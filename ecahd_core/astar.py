@@ -346,8 +346,9 @@ class AStarPlanner:
         with g(0) = 0, g(k) = |k| - 0.5, increasing in each gap. A row pass gives every cell the
         gap to the nearest obstacle square of its own row (:func:`_row_gap`); the column pass
         takes the minimum of hypot(g(dr), that) over the 2w + 1 rows round each queried cell
-        only: O(H W + K w) instead of a (K, (2w + 1)^2) window, 5 s -> 0.1 s on a 2000 x 2000
-        map, and the same numbers bit for bit (a test compares with the window)."""
+        only: O(H W + K w) instead of a (K, (2w + 1)^2) window (the whole build 1.25 -> 0.24 s
+        on a 2000 x 2000 map, ``scripts/compare_astar_build.py``), and the same numbers bit
+        for bit (a test compares with the window)."""
         w = self._pad
         if len(rows) == 0:
             return np.zeros(0)
@@ -767,9 +768,9 @@ def planner_for(grid: GridMap, clearance: float, *, smooth: bool = True,
     """The A* a caller should plan with on ``grid``: :class:`AStarPlanner` on maps of at most
     ``COARSE_ABOVE_CELLS`` cells, else a :class:`CoarseAStarPlanner` over it (same contract and
     checks, paths within about 1% of the shortest; its graph takes about a second to build on a
-    4 M-cell map, once). ``landmarks``: of the coarse search's ALT heuristic; each costs a
-    Dijkstra over the coarse graph at build time (about 0.15 s on that map), so a planner for
-    one query (a detour on a grid that changes) wants 0."""
+    4 M-cell map, once: ``scripts/compare_astar_build.py``). ``landmarks``: of the coarse
+    search's ALT heuristic; each costs a Dijkstra over the coarse graph at build time, so a
+    planner for one query (a detour on a grid that changes) wants 0."""
     fine = AStarPlanner(grid, clearance, smooth=smooth)
     if grid.height * grid.width <= COARSE_ABOVE_CELLS:
         return fine

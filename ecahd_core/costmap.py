@@ -29,6 +29,7 @@ same slope as the cost inside an obstacle (1 per ``margin`` metres): the linear 
 """
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -137,11 +138,8 @@ class CostMap:
         for r0, r1, c0, c1 in boxes:
             if not bool(torch.isfinite(grid[r0:r1, c0:c1]).all()):
                 raise MapError(f"cost map {name!r}: grid has non-finite values")
-        out = CostMap.__new__(CostMap)
-        out.grid, out.origin, out.resolution = grid, self.origin, self.resolution
-        out.margin, out.dilation, out.name = self.margin, self.dilation, name
-        out._converted = {}
-        out._centre0 = self._centre0
+        out = copy.copy(self)  # origin, resolution, margin, dilation and the lookup's origin
+        out.grid, out.name, out._converted = grid, name, {}
         corners = self._corners.clone().view(4, H, W)
         for r0, r1, c0, c1 in boxes:  # a cell's corners read its row and column + 1
             r0, c0 = max(r0 - 1, 0), max(c0 - 1, 0)

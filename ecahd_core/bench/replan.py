@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import time
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -158,13 +157,11 @@ def _remember_boxes(memory, grid, centres: np.ndarray, side: float, now: float) 
 
 
 def _median_ms(fn, repeats: int) -> tuple[float, object]:
-    """(median wall time [ms] of ``repeats`` calls, the last call's result)."""
-    times, out = [], None
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - t0)
-    return 1e3 * float(np.median(times)), out
+    """(``bench.timing.median_ms`` of ``repeats`` calls, the last call's result)."""
+    from ecahd_core.bench.timing import median_ms
+
+    out = []
+    return median_ms(lambda: out.append(fn()), repeats), out[-1]
 
 
 def _timed_detour(grid, footprint, start, goal, coarse: bool, repeats: int):
@@ -193,13 +190,14 @@ def run_replan_benchmark(settings: ReplanBenchSettings = ReplanBenchSettings(), 
     from ecahd_core.cost import CollisionCost
     from ecahd_core.footprint import make_footprint
     from ecahd_core.maps import GridMap
-    from ecahd_core.sensing import ObstacleMemory
+    from ecahd_core.sensing import ObstacleMemory, fuse_grid
 
     s = settings
     grid = load_bench_map(s.map)
     footprint = make_footprint(s.robot)
     static = CollisionCost.build(grid, footprint).as_tuple()
     astar = planner_for(grid, clearance_for_footprint(footprint))
+    grid.free_distance  # noqa: B018  once per map, as the nodes' static map has it
     rng = np.random.default_rng(s.seed)
     result = ReplanBenchResult(settings=s, map_name=grid.name, map_cells=grid.data.shape,
                                resolution=grid.resolution, machine=machine_info())
@@ -220,8 +218,8 @@ def run_replan_benchmark(settings: ReplanBenchSettings = ReplanBenchSettings(), 
             continue
         now = 100.0
         memory = ObstacleMemory(grid)
+        dense = resample(route, grid.resolution)  # (N, 2) the route a cell apart
         if s.obstacles:
-            dense = resample(route, grid.resolution)
             at = np.linspace(0, len(dense) - 1, s.obstacles + 2)[1:-1].round().astype(int)
             _remember_boxes(memory, grid, dense[at], s.box, now)
         fused = memory.fused(now)
@@ -242,9 +240,6 @@ def run_replan_benchmark(settings: ReplanBenchSettings = ReplanBenchSettings(), 
         crosses_ref = not report.collision_free
         # local_refiner: fuse a 6 m window round the first box, judge 6 m of the route there
         if s.obstacles:
-            from ecahd_core.sensing import fuse_grid
-
-            dense = resample(route, grid.resolution)
             k = int(round((len(dense) - 1) / (s.obstacles + 1)))
             segment = dense[max(k - int(3 / grid.resolution), 0):
                             k + int(3 / grid.resolution) + 1]
@@ -258,7 +253,6 @@ def run_replan_benchmark(settings: ReplanBenchSettings = ReplanBenchSettings(), 
                 if not bound:
                     g.__dict__.pop("free_distance", None)
                 return check_collision(segment, footprint, g).collision_free
-            grid.free_distance  # noqa: B018  once per map, as the refiner's static map has it
             judge_ms, verdict = _median_ms(lambda: judge(True), s.repeats)
             judge_ref_ms, verdict_ref = _median_ms(lambda: judge(False), 1)
         else:
