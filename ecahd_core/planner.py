@@ -59,6 +59,8 @@ class SparseConfig:
             ``warm_fraction`` (0..1) of the schedule begins, and runs only those steps
             (diffusion.sampler, "Warm start"). 0: off, every plan samples from noise (Algorithm
             1 as written). A goal's first plan always samples from noise.
+        precision: "fp32", "bf16" or "auto" (bf16 where the CPU computes it natively): the
+            SD Transformer's inference precision (``SamplerConfig.precision``; ours).
     """
 
     num_candidates: int = 10
@@ -74,6 +76,7 @@ class SparseConfig:
     max_spacing: float | None = None
     densify_rounds: int = 2
     warm_fraction: float = 0.0
+    precision: str = "fp32"
 
     def __post_init__(self) -> None:
         if self.max_spacing is not None and not (np.isfinite(self.max_spacing)
@@ -167,7 +170,7 @@ class SparseDiffusion:
             checkpoint, device=device, config=SamplerConfig(
                 num_steps=steps, eta=self.config.eta,
                 guidance_weight=self.config.guidance_weight,
-                guidance_space=self.config.guidance_space))
+                guidance_space=self.config.guidance_space, precision=self.config.precision))
         if cost is None and (self.config.guidance or self.config.selection == "collision_aware"):
             raise EcahdError("SD guidance and the collision_aware rule need the cost J "
                              "(costmap, footprint points, CostConfig)")
@@ -355,6 +358,8 @@ class DenseConfig:
         keep_better: our third rule, beyond the paper: when DD's plan costs more by J than the
             straight local plan it was asked to improve (DD can overshoot), keep the straight
             plan (polishing then starts from it). False is the paper's behaviour.
+        precision: "fp32", "bf16" or "auto": the DD Transformer's inference precision
+            (``SamplerConfig.precision``; ours).
     """
 
     points: int | None = None
@@ -371,6 +376,7 @@ class DenseConfig:
     polish_steps: int = 30
     polish_step_size: float = 0.05
     keep_better: bool = True
+    precision: str = "fp32"
 
     def __post_init__(self) -> None:
         self.polish_config()  # validates the polishing settings
@@ -504,7 +510,7 @@ class HierarchicalPlanner:
             self.dd = DiffusionSampler.from_checkpoint(dense_checkpoint, device=device, config=SamplerConfig(
                 num_steps=steps, eta=self.dense.eta, guidance_weight=self.dense.guidance_weight,
                 guide_last=self.dense.guide_last, max_guide_norm=self.dense.max_guide_norm,
-                guidance_space=self.dense.guidance_space))
+                guidance_space=self.dense.guidance_space, precision=self.dense.precision))
 
     def local_cost(self, segments: torch.Tensor, goals: torch.Tensor) -> torch.Tensor:
         """J's collision cost c^l of local plans. segments: (B, P^l, 2), goals: (B, 2) -> (B,)."""

@@ -42,6 +42,8 @@ Parameters (read-only, declared in :data:`PARAMETERS`):
         Doubles with each further such replan (at most 8x) until a waypoint is reached.
     seed (int, 0): seed of the sampler's torch.Generator (a seed reproduces a plan sequence).
     torch_threads (int, 1): torch.set_num_threads.
+    inference_precision (str, "auto"): fp32, bf16, or auto (bf16 where the CPU has native
+        bfloat16): the SD Transformer's encoder layers (``SamplerConfig.precision``).
 A parameter out of range, an unknown robot or an unreadable model ends the node at start-up
 with one error line and exit code 1 (``ecahd_ros.spin``).
 
@@ -78,9 +80,12 @@ from ecahd_core.navigation import (REPLAN_POLICIES, SNAP_DISTANCE, GlobalRunner,
                                    GlobalRunnerConfig, PlanRequest, validate_pose)
 from ecahd_core.planner import SELECTION_RULES, SparseConfig, SparseDiffusion, SparsePlan
 from ecahd_ros.conversions import msg_to_grid, timing_message, xy_to_path
-from ecahd_ros.params import (ParamSpec, declare_parameters, make_robot, read_parameters,
-                              require, require_non_negative, require_positive, shared)
+from ecahd_ros.params import (ParamSpec, declare_parameters, make_robot,
+                              read_parameters, require, require_non_negative, require_positive,
+                              shared)
 from ecahd_ros.qos import MAP_QOS, PLAN_QOS, STREAM_QOS, VIZ_QOS
+
+PRECISIONS = ("auto", "fp32", "bf16")
 from ecahd_ros.spin import spin_node
 
 METHODS = ("sd", "astar", "fd")  # ECAHD's Sparse Diffusion; the Table III baselines' planners
@@ -121,6 +126,9 @@ PARAMETERS = [
                                      "reached; 0 = never"),
     ParamSpec("obstacle_memory", 60.0, "[s] obstacles the local costmap found are avoided "
                                        "by re-plans for this long unless seen gone"),
+    ParamSpec("inference_precision", "auto", f"sd: the SD Transformer computes in one of "
+                                             f"{list(PRECISIONS)} (auto: bf16 where the CPU has "
+                                             f"native bfloat16, AVX512-BF16 or AMX)"),
     *shared("seed", "torch_threads"),
 ]
 
@@ -153,10 +161,13 @@ class GlobalPlannerParams:
     obstacle_memory: float
     seed: int
     torch_threads: int
+    inference_precision: str
 
     def __post_init__(self) -> None:
         require_positive(self, "num_candidates", "epsilon", "waypoint_tolerance",
                          "torch_threads")
+        require(self.inference_precision in PRECISIONS, "inference_precision",
+                self.inference_precision, f"one of {list(PRECISIONS)}")
         require_non_negative(self, "ddim_steps", "footprint_padding", "seed", "replan_timeout",
                              "obstacle_memory", "clearance_margin", "max_spacing", "leg_repair")
         require(self.place_reach >= 0 or self.place_reach == -1, "place_reach",
@@ -180,7 +191,8 @@ class GlobalPlannerParams:
         return SparseConfig(num_candidates=self.num_candidates, horizon=self.horizon,
                             epsilon=self.epsilon, selection=self.selection,
                             num_steps=self.ddim_steps or None,
-                            max_spacing=self.max_spacing or None)
+                            max_spacing=self.max_spacing or None,
+                            precision=self.inference_precision)
 
 
 def candidate_markers(plan: SparsePlan, frame_id: str, stamp) -> MarkerArray:

@@ -124,6 +124,27 @@ def test_denoiser_inference_path_is_the_modules_bit_for_bit():
     assert "_fast_args" not in model.__dict__
 
 
+def test_bf16_inference_is_close_to_float32_and_switches_back():
+    model = tiny_model()
+    x, t = torch.randn(4, 7, 2), torch.tensor([0, 30, 60, 99])
+    with torch.inference_mode():
+        fp32 = model(x, t)
+        assert model.set_inference_precision("bf16") == "bf16"
+        assert model.inference_dtype == torch.bfloat16
+        bf16 = model(x, t)
+        assert bf16.dtype == torch.float32 and not torch.equal(bf16, fp32)
+        torch.testing.assert_close(bf16, fp32, rtol=0.05, atol=0.05)
+        assert model.set_inference_precision("fp32") == "fp32"
+        assert torch.equal(model(x, t), fp32)
+    model.set_inference_precision("bf16")
+    with torch.enable_grad():  # gradients: the float32 modules, not the bf16 kernel
+        torch.testing.assert_close(model(x, t).detach(), fp32, rtol=1e-5, atol=1e-5)
+    sampler = DiffusionSampler(model, DDIMScheduler(), NORMALIZER, SamplerConfig(precision="bf16"))
+    assert sampler.precision == "bf16" and model.inference_dtype == torch.bfloat16
+    with pytest.raises(ValueError, match="precision"):
+        SamplerConfig(precision="fp16")
+
+
 def test_denoiser_config_is_validated_and_keyword_only():
     with pytest.raises(TypeError):
         DenoiserConfig(10)  # keyword-only

@@ -18,7 +18,8 @@ from ecahd_core.diffusion.normalizer import Normalizer
 from ecahd_core.diffusion.sampler import sample
 from ecahd_core.diffusion.scheduler import DDIMScheduler, ScheduleConfig
 from ecahd_core.diffusion.training import (CHECKPOINT_VERSION, Checkpoint, TrainConfig,
-                                           load_checkpoint, train)
+                                           load_checkpoint, native_bf16, resolve_precision,
+                                           train)
 from ecahd_core.errors import CheckpointError, DatasetError
 
 MAP_BOUNDS = (0.0, 0.0, 4.0, 4.0)  # [m] a 4 m x 4 m empty 'map'
@@ -241,6 +242,39 @@ def test_resume_continues_exactly_from_the_saved_step(tmp_path):
     with pytest.raises(CheckpointError, match="no training state"):
         train(model_cfg, arrays, NORMALIZER, TrainConfig(steps=30, **common),
               out_path=tmp_path / "x.pt", resume_from=light, **kw)
+
+
+def test_bf16_training_runs_under_autocast_and_keeps_float32_weights(tmp_path):
+    """precision="bf16": the forward pass runs in bfloat16 (so the weights differ from the
+    float32 run's), the loss falls as in float32, and weights and EMA stay float32."""
+    arrays = toy_arrays(n=128)
+    common = dict(steps=60, batch_size=32, lr=3e-3, warmup_steps=5, ema_decay=0.9, seed=1,
+                  log_every=20)
+    kw = dict(kind="sd", meta=META, progress=False)
+    runs = {p: train(tiny_config(d_model=16, n_layers=1), arrays, NORMALIZER,
+                     TrainConfig(precision=p, **common), out_path=tmp_path / f"{p}.pt", **kw)
+            for p in ("fp32", "bf16")}
+    for p, run in runs.items():
+        ckpt = load_checkpoint(run.path)
+        assert ckpt.train_config["precision"] == p
+        assert all(v.dtype == torch.float32 for v in ckpt.ema_state_dict.values()
+                   if v.is_floating_point())
+        losses = [loss for _, loss in run.loss_history]
+        assert np.isfinite(losses).all() and losses[-1] < 0.7 * losses[0], (p, losses)
+    a, b = (runs[p].ema_model.state_dict() for p in ("fp32", "bf16"))
+    assert any(not torch.equal(a[k], b[k]) for k in a)
+    fp32, bf16 = (runs[p].loss_history[-1][1] for p in ("fp32", "bf16"))
+    assert bf16 == pytest.approx(fp32, rel=0.3)
+
+
+def test_precision_choice():
+    assert resolve_precision("fp32") == "fp32" and resolve_precision("bf16") == "bf16"
+    assert resolve_precision("auto") == ("bf16" if native_bf16("cpu") else "fp32")
+    assert resolve_precision("auto", "meta") == "fp32"
+    with pytest.raises(ValueError, match="precision"):
+        resolve_precision("fp16")
+    with pytest.raises(ValueError, match="TrainConfig.precision"):
+        TrainConfig(steps=1, precision="fp16")
 
 
 def test_bad_training_input_is_reported(tmp_path):

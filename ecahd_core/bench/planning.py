@@ -88,6 +88,7 @@ class PlanningBenchSettings:
     max_spacing: float | None = None  # [m] SparseConfig.max_spacing (None: off)
     place_reach: float | None = None  # [m] placement.placer_for (0: off; None: by map size)
     warm_fraction: float = 0.0  # SparseConfig.warm_fraction: HD's warm-started re-plans (0: off)
+    precision: str = "fp32"  # the SD Transformer's inference precision (SparseConfig.precision)
     ablation: bool = True
     safety_net: bool = True  # ours: judge HD / ECAHD with and without the net (ecahd_core.safety)
     net_retries: int = 2  # SafetyNetConfig's default
@@ -203,7 +204,8 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                 num_candidates=settings.candidates, selection=settings.selection, guidance=(method == "sd" and guidance),
                 guidance_weight=settings.guidance_weight,
                 guidance_space=settings.guidance_space,
-                warm_fraction=settings.warm_fraction, max_spacing=settings.max_spacing),
+                warm_fraction=settings.warm_fraction, max_spacing=settings.max_spacing,
+                precision=settings.precision),
                 cost=cost, placer=placer_for(grid, fp, settings.place_reach))
             if method == "sd":
                 plan_fn = lambda s, g: (sd.plan(s, g, generator=gen).waypoints, None)  # noqa: E731

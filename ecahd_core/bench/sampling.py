@@ -19,9 +19,9 @@ from __future__ import annotations
 import logging
 import statistics
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
-from ecahd_core.bench.timing import median_ms
+from ecahd_core.bench.timing import interleaved_median_ms, median_ms
 
 log = logging.getLogger(__name__)
 
@@ -54,6 +54,7 @@ class SamplingBenchResult:
     fd_guided_ms: float
     dd_step_breakdown_ms: dict = field(default_factory=dict)
     sd_replan_ms: dict = field(default_factory=dict)
+    bf16_ms: dict = field(default_factory=dict)  # {"sd_best_of_10": ms, "dd_plan": ms}
     context: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
@@ -68,7 +69,8 @@ def run_sampling_benchmark(settings: SamplingBenchSettings, *, models: dict | No
     import torch
 
     from ecahd_core.cost import CostConfig, trajectory_cost
-    from ecahd_core.diffusion import DiffusionSampler, SamplerConfig, apply_conditioning
+    from ecahd_core.diffusion import (DiffusionSampler, SamplerConfig, apply_conditioning,
+                                      native_bf16)
     from ecahd_core.footprint import make_footprint
     from ecahd_core.guidance import CostJGuide
     from ecahd_core.maps import load_map
@@ -92,11 +94,17 @@ def run_sampling_benchmark(settings: SamplingBenchSettings, *, models: dict | No
     gen = torch.Generator().manual_seed(settings.seed)
     reps = settings.repeats
 
-    # SD best-of-10: one batch of 10 candidates
-    def sd():
-        return samplers["sd"].sample(batch=10, horizon=10, conditions={0: start, -1: goal},
-                                     generator=gen)
-    sd_ms = median_ms(sd, reps, warmup=2)
+    # SD best-of-10: one batch of 10 candidates, the Transformer in float32 and in bfloat16
+    # (SamplerConfig.precision), timed in turn
+    bf16 = {k: DiffusionSampler.from_checkpoint(ckpt[k], config=replace(
+        samplers[k].config, precision="bf16")) for k in ("sd", "dd")}
+
+    def sd(sampler=samplers["sd"]):
+        return sampler.sample(batch=10, horizon=10, conditions={0: start, -1: goal},
+                              generator=gen)
+    sd_pair = interleaved_median_ms({"fp32": sd, "bf16": lambda: sd(bf16["sd"])}, reps,
+                                    warmup=2)
+    sd_ms = sd_pair["fp32"]
 
     # Algorithm 1's first re-plan with the planner's selection: from noise vs warm-started
     from ecahd_core.planner import SparseConfig, SparseDiffusion
@@ -121,11 +129,13 @@ def run_sampling_benchmark(settings: SamplingBenchSettings, *, models: dict | No
     n_seg, P_l = len(seg_start), dense_points(ckpt["dd"])  # P^l the DD learnt
     guide = CostJGuide(costmap, footprint.points, seg_goal, cost_config)
 
-    def dd():
-        return samplers["dd"].sample(batch=n_seg, horizon=P_l,
-                                     conditions={0: seg_start, -1: seg_goal},
-                                     generator=gen, guide=guide)
-    dd_ms = median_ms(dd, reps, warmup=2)
+    def dd(sampler=samplers["dd"]):
+        return sampler.sample(batch=n_seg, horizon=P_l, conditions={0: seg_start, -1: seg_goal},
+                              generator=gen, guide=guide)
+    dd_pair = interleaved_median_ms({"fp32": dd, "bf16": lambda: dd(bf16["dd"])}, reps,
+                                    warmup=2)
+    dd_ms = dd_pair["fp32"]
+    bf16_ms = {"sd_best_of_10": sd_pair["bf16"], "dd_plan": dd_pair["bf16"]}
 
     # One guided DD step, timed stage by stage (Table IV)
     dd_s = samplers["dd"]
@@ -178,10 +188,11 @@ def run_sampling_benchmark(settings: SamplingBenchSettings, *, models: dict | No
                "n_interp": cost_config.n_interp, "threads": torch.get_num_threads(),
                "torch": torch.__version__, "repeats": reps,
                "sample_steps": {k: sample_steps(c) for k, c in ckpt.items()},
-               "guidance_weight": settings.guidance_weight, "paper": PAPER}
+               "guidance_weight": settings.guidance_weight, "native_bf16": native_bf16("cpu"),
+               "paper": PAPER}
     return SamplingBenchResult(sd_best_of_10_ms=sd_ms, dd_plan_ms=dd_ms, dd_step_ms=step_ms,
                                fd_ms=fd_ms, fd_guided_ms=fdg_ms, dd_step_breakdown_ms=breakdown,
-                               sd_replan_ms=replan_ms, context=context)
+                               sd_replan_ms=replan_ms, bf16_ms=bf16_ms, context=context)
 
 
 def format_table(r: SamplingBenchResult) -> str:
@@ -202,6 +213,13 @@ def format_table(r: SamplingBenchResult) -> str:
     for name, ms in r.sd_replan_ms.items():
         row(f"SD re-plan, h 9, {'from noise' if name == 'noise' else 'warm ' + name}", ms, None)
     row("guided DD, all 9 segments of a plan", r.dd_plan_ms, None)
+    kind = "native" if c.get("native_bf16") else "emulated: no AVX512-BF16/AMX"
+    for key, name, fp32 in (("sd_best_of_10", "SD best-of-10", r.sd_best_of_10_ms),
+                            ("dd_plan", "guided DD, 9 segments", r.dd_plan_ms)):
+        if key in r.bf16_ms:
+            ms = r.bf16_ms[key]
+            row(f"{name}, bf16 ({fp32 / ms:.2f}x as fast)", ms, None)
+
     row("FD 100 points, unguided", r.fd_ms, p["fd_s"] * 1e3)
     row("FD 100 points, guided", r.fd_guided_ms, p["fd_guided_s"] * 1e3)
     row("one guided DD step (9 segments)", r.dd_step_ms, p["dd_step_ms"])
@@ -217,4 +235,7 @@ def format_table(r: SamplingBenchResult) -> str:
     lines.append("SD re-plan: Algorithm 1's re-plan from waypoint 1 (horizon 9) with the "
                  "collision-aware selection; warm f: started from the previous plan's rest, the "
                  "last f of the DDIM schedule")
+    if r.bf16_ms:
+        lines.append(f"bf16: SamplerConfig.precision, the Transformers' encoder layers in "
+                     f"bfloat16 ({kind})")
     return "\n".join(lines)

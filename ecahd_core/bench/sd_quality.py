@@ -26,6 +26,7 @@ class SDQuality:
     mean_length_ratio: float  # plan length / A* length
     sample_ms: float  # wall time of sampling all problems in one batch
     seed: int
+    precision: str = "fp32"  # the Transformer's inference precision (SamplerConfig.precision)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -33,7 +34,7 @@ class SDQuality:
 
 def evaluate_sd(checkpoint, grid, problems, *, horizon: int = 10, num_steps: int = 10,
                 eta: float = 0.0, seed: int = 0, epsilon: float = 1.0,
-                device: str = "cpu") -> tuple[SDQuality, np.ndarray]:
+                device: str = "cpu", precision: str = "fp32") -> tuple[SDQuality, np.ndarray]:
     """Sample one SD plan per problem in one batch -> (metrics, plans (N, horizon, 2) [m])."""
     import torch
 
@@ -42,7 +43,8 @@ def evaluate_sd(checkpoint, grid, problems, *, horizon: int = 10, num_steps: int
     from ecahd_core.footprint import circle_footprint
 
     sampler = DiffusionSampler.from_checkpoint(
-        checkpoint, device=device, config=SamplerConfig(num_steps=num_steps, eta=eta))
+        checkpoint, device=device, config=SamplerConfig(num_steps=num_steps, eta=eta,
+                                                        precision=precision))
     starts = torch.tensor(np.stack([p.start for p in problems]), dtype=torch.float32)
     goals = torch.tensor(np.stack([p.goal for p in problems]), dtype=torch.float32)
     gen = torch.Generator(device=device).manual_seed(seed)
@@ -67,7 +69,7 @@ def evaluate_sd(checkpoint, grid, problems, *, horizon: int = 10, num_steps: int
                         collision_free_point=float(np.mean(free)),
                         expert_collision_free_point=float(np.mean(expert)),
                         mean_length_ratio=float(np.mean(ratio)), sample_ms=elapsed * 1e3,
-                        seed=seed)
+                        seed=seed, precision=sampler.precision)
     return metrics, plans
 
 

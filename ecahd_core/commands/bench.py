@@ -132,6 +132,8 @@ def _add_sd_quality_arguments(parser: argparse.ArgumentParser) -> None:
                         help="DDIM steps (default: the checkpoint's)")
     parser.add_argument("--eta", type=float, default=None,
                         help="DDIM eta (default: the SD planner's, SparseConfig.eta)")
+    parser.add_argument("--precision", default="fp32", choices=("auto", "fp32", "bf16"),
+                        help="the SD Transformer's inference precision")
     parser.add_argument("--png", metavar="FILE", help="draw the first 8 plans")
     parser.add_argument("--json", metavar="FILE", help="also write the result as JSON to FILE")
 
@@ -150,9 +152,9 @@ def _run_sd_quality(args: argparse.Namespace) -> int:
     steps = args.steps or sample_steps(ckpt)
     eta = SparseConfig().eta if args.eta is None else args.eta
     metrics, plans = evaluate_sd(ckpt, grid, problems, num_steps=steps, eta=eta,
-                                 seed=args.sample_seed)
+                                 seed=args.sample_seed, precision=args.precision)
     print(f"SD alone (unguided, 1 sample) on {grid.name}: {metrics.problems} problems "
-          f"(seed {args.seed}), {steps} DDIM steps, eta {eta}")
+          f"(seed {args.seed}), {steps} DDIM steps, eta {eta}, {metrics.precision}")
     print(f"  a waypoint within 1.0 m of the goal: {100 * metrics.goal_reached:.1f}%  (target >= 85%)")
     print(f"  collision-free for a point robot:    {100 * metrics.collision_free_point:.1f}%  "
           f"(target >= 80%)")
@@ -204,6 +206,9 @@ def _add_planning_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--warm-fraction", type=float, default=d.warm_fraction, metavar="F",
                         help="HD every_waypoint: warm-start each re-plan from the previous plan, "
                              "running the last F (0..1) of the DDIM schedule (0: from noise)")
+    parser.add_argument("--precision", default=d.precision, choices=("auto", "fp32", "bf16"),
+                        help="the SD Transformer's inference precision (auto: bf16 where the "
+                             "CPU has native bfloat16)")
     parser.add_argument("--max-spacing", type=float, default=d.max_spacing, metavar="M",
                         help="[m] waypoint spacing by distance: SD re-samples legs longer than "
                              "this between their ends (big maps; default: off, the paper's "
@@ -231,7 +236,7 @@ def _run_planning(args: argparse.Namespace) -> int:
         c_th=args.c_th, dd_retries=args.dd_retries, polish_steps=args.polish_steps,
         keep_better=not args.no_keep_better, replan=args.replan,
         warm_fraction=args.warm_fraction, max_spacing=args.max_spacing,
-        place_reach=args.place_reach, ablation=not args.no_ablation)
+        place_reach=args.place_reach, ablation=not args.no_ablation, precision=args.precision)
     result = run_planning_benchmark(settings, progress=not args.no_progress)
     md = format_markdown(result)
     print(md)

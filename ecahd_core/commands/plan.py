@@ -68,6 +68,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="[m] SD/ECAHD: SD's waypoints in a wall move into free space within R "
                         "and legs crossing a wall get a placed midpoint (ours; 0: off; "
                         "default: on at 1 m for maps over 50 000 cells, off on smaller ones)")
+    p.add_argument("--precision", default="auto", choices=("auto", "fp32", "bf16"),
+                   help="the SD Transformer's inference precision (auto: bf16 where the CPU "
+                        "has native bfloat16, as global_planner's inference_precision)")
     p.add_argument("--candidates", type=int, default=10,
                    help="diffusion candidates sampled in one batch (best of N)")
     p.add_argument("--selection", default="collision_aware",
@@ -98,6 +101,7 @@ def run(args: argparse.Namespace) -> int:
     from ecahd_core.astar import clearance_for_footprint, path_length, planner_for
     from ecahd_core.collision import check_collision
     from ecahd_core.dataset import resample_by_arclength
+    from ecahd_core.diffusion import resolve_precision
     from ecahd_core.footprint import make_footprint
     from ecahd_core.maps import load_map
     from ecahd_core.viz import save_figures
@@ -172,6 +176,8 @@ def run(args: argparse.Namespace) -> int:
             "penetration_fraction": float(report.penetration_fraction),
             "timings_ms": timings, "dd_calls": dd_calls, "waypoints_placed": placed,
             "replan": args.replan if args.method in ("ecahd", "hd") else None,
+            "precision": (resolve_precision(args.precision)
+                          if args.method in ("ecahd", "hd", "sd") else None),
             "safety_net": bool(args.safety_net), "rule": rule,
             "collision_free_before_net": (bool(report.collision_free) if safe is None
                                           else not safe.collided_before),
@@ -241,7 +247,8 @@ def _plan_diffusion(args, grid, footprint, start, goal):
                                     horizon=args.waypoints),
                          SparseConfig(num_candidates=args.candidates, horizon=args.waypoints,
                                       selection=args.selection, max_spacing=args.max_spacing,
-                                      guidance=(args.method == "sd" and guided)), cost=cost,
+                                      guidance=(args.method == "sd" and guided),
+                                      precision=args.precision), cost=cost,
                          placer=placer_for(grid, footprint, args.place_reach))
     if args.method == "sd":
         sd.plan(start, goal, generator=gen())  # warm-up

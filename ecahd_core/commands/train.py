@@ -2,7 +2,7 @@
 
     ecahd train sd --data data/large.npz --out runs/train/sd.pt
     ecahd train-all --map my_map.yaml --out-dir my_models   # dataset + SD + DD, seeded
-    ecahd train-all --map maze2d-large --kinds sd dd fd     # the shipped models, bit for bit
+    ecahd train-all --map maze2d-large --kinds sd dd fd --precision fp32   # the shipped models
 
 Defaults come from ``ecahd_core.model_zoo.RECIPES``; ``--device cuda`` trains on a GPU, and the
 same command under ``torchrun --nproc_per_node N`` trains with DistributedDataParallel.
@@ -27,6 +27,10 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--steps-scale", type=float, default=1.0,
                    help="multiply every recipe's step count (and warm-up) by this")
     add_threads_argument(p, default=None)
+    p.add_argument("--precision", default="auto", choices=("auto", "fp32", "bf16"),
+                   help="bf16: forward pass under bfloat16 autocast (float32 weights); auto: "
+                        "bf16 where the device computes it natively (AVX512-BF16 / AMX CPUs, "
+                        "recent GPUs), fp32 elsewhere")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -62,7 +66,7 @@ def add_all_arguments(p: argparse.ArgumentParser) -> None:
 def train_one(kind: str, dataset, *, out: Path, seed: int, device: str, steps: int | None = None,
               batch_size: int | None = None, warmup: int | None = None,
               steps_scale: float = 1.0, resume: str | None = None, ship: Path | None = None,
-              progress: bool = True):
+              progress: bool = True, precision: str = "fp32"):
     """Train one model kind on an ExpertDataset; returns the TrainResult."""
     from ecahd_core.diffusion import Normalizer, TrainConfig, train
     from ecahd_core.model_zoo import model_meta, recipe, training_arrays
@@ -75,11 +79,11 @@ def train_one(kind: str, dataset, *, out: Path, seed: int, device: str, steps: i
     tc = TrainConfig(steps=steps, batch_size=batch_size or r.batch_for(max(arrays)),
                      warmup_steps=warmup,
                      lr=r.lr, ema_decay=r.ema_decay, seed=seed, device=device,
-                     log_every=max(1, min(100, steps // 20)))
+                     log_every=max(1, min(100, steps // 20)), precision=precision)
     normalizer = Normalizer.from_bounds(*dataset.grid().bounds)
     n = sum(len(a) for a in arrays.values())
-    log.info("training %s: %d trajectories, horizons %s, %d steps x batch %d on %s",
-             kind, n, sorted(arrays), tc.steps, tc.batch_size, device)
+    log.info("training %s: %d trajectories, horizons %s, %d steps x batch %d on %s (%s)",
+             kind, n, sorted(arrays), tc.steps, tc.batch_size, device, precision)
     result = train(config, arrays, normalizer, tc, kind=kind, out_path=out,
                    meta=model_meta(kind, dataset), resume_from=resume, progress=progress)
     if ship is not None and result.checkpoint is not None:
@@ -95,7 +99,8 @@ def train_one(kind: str, dataset, *, out: Path, seed: int, device: str, steps: i
 ESTIMATE_HORIZONS = {"sd": tuple(range(2, 11)), "dd": (4,), "fd": (100,)}
 
 
-def seconds_per_step(kind: str, grid, *, device: str = "cpu", probe: int = 8) -> float:
+def seconds_per_step(kind: str, grid, *, device: str = "cpu", probe: int = 8,
+                     precision: str = "fp32") -> float:
     """[s] one optimiser step of ``kind``'s recipe on this machine, measured on synthetic
     trajectories of the learnt horizons (a step's cost does not depend on the values): short
     runs of :func:`~ecahd_core.diffusion.train` (a warm-up, then 1 and 1 + ``probe`` steps; the
@@ -121,7 +126,8 @@ def seconds_per_step(kind: str, grid, *, device: str = "cpu", probe: int = 8) ->
     with tempfile.TemporaryDirectory() as tmp:
         for steps in (1, 1, 1 + probe):
             tc = TrainConfig(steps=steps, batch_size=r.batch_size, warmup_steps=0, lr=r.lr,
-                             ema_decay=r.ema_decay, seed=0, device=device, log_every=10 ** 9)
+                             ema_decay=r.ema_decay, seed=0, device=device, log_every=10 ** 9,
+                             precision=precision)
             t0 = time.perf_counter()
             train(config, arrays, normalizer, tc, kind=kind, out_path=Path(tmp) / "probe.pt",
                   progress=False)
@@ -138,14 +144,17 @@ def _set_threads(n: int | None) -> None:
 def run(args: argparse.Namespace) -> int:
     from ecahd_core.dataset import ExpertDataset
 
+    from ecahd_core.diffusion import resolve_precision
+
     _set_threads(args.threads)
+    precision = resolve_precision(args.precision, args.device)
     dataset = ExpertDataset.load(args.data)
     t0 = time.perf_counter()
     result = train_one(args.kind, dataset, out=Path(args.out), seed=args.seed, device=args.device,
                        steps=args.steps, batch_size=args.batch_size, warmup=args.warmup,
                        steps_scale=args.steps_scale, resume=args.resume,
                        ship=Path(args.ship) if args.ship else None,
-                       progress=not args.no_progress)
+                       progress=not args.no_progress, precision=precision)
     last = result.loss_history[-1][1] if result.loss_history else float("nan")
     print(f"trained {args.kind}: {result.step} steps in {time.perf_counter() - t0:.0f} s, "
           f"final loss {last:.4f} -> {result.path}")
@@ -163,10 +172,12 @@ def _clock(seconds_from_now: float) -> str:
 
 def run_all(args: argparse.Namespace) -> int:
     from ecahd_core.dataset import generate_dataset
+    from ecahd_core.diffusion import resolve_precision
     from ecahd_core.maps import load_map
     from ecahd_core.model_zoo import MODELS_DIR, MODELS_ENV, recipe, shipped_path
 
     _set_threads(args.threads)
+    precision = resolve_precision(args.precision, args.device)
     work = Path(args.work_dir)
     work.mkdir(parents=True, exist_ok=True)
     grid = load_map(args.map)
@@ -174,14 +185,14 @@ def run_all(args: argparse.Namespace) -> int:
     t_start = time.perf_counter()
     # an ETA from the start: each model's step time measured now, the dataset has its own bar
     steps = {k: max(1, int(round(recipe(k).steps * args.steps_scale))) for k in args.kinds}
-    estimate = {k: steps[k] * seconds_per_step(k, grid, device=args.device)
+    estimate = {k: steps[k] * seconds_per_step(k, grid, device=args.device, precision=precision)
                 for k in args.kinds}
     train_s = sum(estimate.values())
     print(f"train-all on {grid.name}: {args.pairs} expert pairs (progress bar below), then "
           + ", ".join(f"{k.upper()} {steps[k]} steps ~{_duration(estimate[k])}"
                       for k in args.kinds)
           + f": training ~{_duration(train_s)} after the dataset (step times measured "
-            f"in {time.perf_counter() - t_start:.0f} s)", flush=True)
+            f"in {time.perf_counter() - t_start:.0f} s; {precision})", flush=True)
     data_path = work / f"{grid.name}_{args.robot}_{args.pairs}_s{args.seed}.npz"
     dataset = generate_dataset(grid, pairs=args.pairs, seed=args.seed, footprint_spec=args.robot,
                                progress=not args.no_progress)
@@ -194,6 +205,7 @@ def run_all(args: argparse.Namespace) -> int:
         ship = out_dir / shipped_path(grid.name, kind).name
         result = train_one(kind, dataset, out=work / f"{grid.name}_{kind}.pt", seed=args.seed,
                            device=args.device, steps_scale=args.steps_scale, ship=ship,
+                           precision=precision,
                            progress=not args.no_progress)
         times[kind] = time.perf_counter() - t0
         last = result.loss_history[-1][1] if result.loss_history else float("nan")

@@ -20,7 +20,8 @@ from ecahd_core.diffusion.sampler import (DiffusionSampler, SampleOutput, Sample
                                           sample)
 from ecahd_core.diffusion.scheduler import (DDIMScheduler, DDIMStepOutput, NoiseSchedule,
                                             ScheduleConfig)
-from ecahd_core.diffusion.training import (Checkpoint, ModelKind, TrainConfig, TrainResult,
+from ecahd_core.diffusion.training import (PRECISIONS, Checkpoint, ModelKind, TrainConfig,
+                                           TrainResult, native_bf16, resolve_precision,
                                            load_checkpoint, train)
 
 __all__ = [
@@ -29,5 +30,6 @@ __all__ = [
     "CostGuide", "Guide", "GuideOutput", "Normalizer",
     "DiffusionSampler", "SampleOutput", "SamplerConfig", "sample", "DDIMScheduler",
     "DDIMStepOutput", "NoiseSchedule", "ScheduleConfig", "Checkpoint", "ModelKind",
-    "TrainConfig", "TrainResult", "load_checkpoint", "train",
+    "TrainConfig", "TrainResult", "load_checkpoint", "train", "PRECISIONS", "native_bf16",
+    "resolve_precision",
 ]

@@ -289,7 +289,8 @@ class TransformerDenoiser(nn.Module):
         (``nn.TransformerEncoderLayer``'s inference fast path); this calls that kernel and the
         final LayerNorm directly with the arguments the modules would pass, skipping their
         per-call eligibility checks (~15% of an SD step on a CPU), so the output is bit for bit
-        the module's. Any other case (training, gradients, autocast, fast path disabled, hooks)
+        the module's in float32 (in bfloat16 after :meth:`set_inference_precision`: the layers
+        compute in it, the final LayerNorm in float32 again). Any other case (training, gradients, autocast, fast path disabled, hooks)
         goes through the modules."""
         if self.training or torch.is_grad_enabled() or torch.is_autocast_enabled() \
                 or not torch.backends.mha.get_fastpath_enabled():
@@ -298,9 +299,31 @@ class TransformerDenoiser(nn.Module):
         if args is None:
             return self.encoder(h)
         layers, norm = args
+        dtype = h.dtype
+        h = h.to(self.inference_dtype)
         for layer_args in layers:
             h = torch._transformer_encoder_layer_fwd(h, *layer_args)
-        return nn.functional.layer_norm(h, *norm)
+        return nn.functional.layer_norm(h.to(dtype), *norm)
+
+    @property
+    def inference_dtype(self) -> torch.dtype:
+        """The dtype the encoder layers compute in on the inference fast path (float32 unless
+        :meth:`set_inference_precision` chose bfloat16)."""
+        return self.__dict__.get("_inference_dtype", torch.float32)
+
+    def set_inference_precision(self, precision: str) -> str:
+        """"fp32" or "bf16": the dtype of the encoder layers' fused inference kernel (weights
+        copied to it once; embeddings, final LayerNorm and head stay float32; training and
+        gradients always run float32). "auto": bf16 where the CPU computes it natively
+        (``training.native_bf16``). Returns the precision chosen."""
+        from ecahd_core.diffusion.training import resolve_precision
+
+        device = next(self.parameters()).device
+        precision = resolve_precision(precision, device)
+        self.__dict__["_inference_dtype"] = (torch.bfloat16 if precision == "bf16"
+                                             else torch.float32)
+        self.__dict__.pop("_fast_args", None)
+        return precision
 
     def _fast_encoder_args(self) -> tuple | None:
         """The encoder's arguments of the fused layer kernel and of its final LayerNorm, or
@@ -319,12 +342,18 @@ class TransformerDenoiser(nn.Module):
                     and attn._qkv_same_embed_dim and layer.activation_relu_or_gelu
                     and layer.norm1.eps == layer.norm2.eps and attn.num_heads % 2 == 0):
                 return None
+            dtype = self.inference_dtype
+
+            def cast(w: Tensor) -> Tensor:
+                return w.detach().to(dtype) if w.dtype != dtype else w
+
             layers.append((
-                attn.embed_dim, attn.num_heads, attn.in_proj_weight, attn.in_proj_bias,
-                attn.out_proj.weight, attn.out_proj.bias, layer.activation_relu_or_gelu == 2,
-                layer.norm_first, layer.norm1.eps, layer.norm1.weight, layer.norm1.bias,
-                layer.norm2.weight, layer.norm2.bias, layer.linear1.weight, layer.linear1.bias,
-                layer.linear2.weight, layer.linear2.bias, None, None))  # no mask
+                attn.embed_dim, attn.num_heads, cast(attn.in_proj_weight),
+                cast(attn.in_proj_bias), cast(attn.out_proj.weight), cast(attn.out_proj.bias),
+                layer.activation_relu_or_gelu == 2, layer.norm_first, layer.norm1.eps,
+                cast(layer.norm1.weight), cast(layer.norm1.bias), cast(layer.norm2.weight),
+                cast(layer.norm2.bias), cast(layer.linear1.weight), cast(layer.linear1.bias),
+                cast(layer.linear2.weight), cast(layer.linear2.bias), None, None))  # no mask
         norm = self.encoder.norm
         if not isinstance(norm, nn.LayerNorm):
             return None
