@@ -361,18 +361,24 @@ class LocalRunner:
         refine: (start (2,), end (2,)) [m] -> SegmentResult; None follows straight segments.
         submit: runs a job, returning a Future; None = a worker thread of this runner
             (``synchronous=True``: run jobs inside the call that submits them).
+        worker_nice: that worker thread's nice value is raised by this much
+            (``threads.lower_priority``): DD yields the CPU to the control ticks.
     Thread safety: :meth:`set_plan`, :meth:`set_pose`, :meth:`tick` are called from one
     thread (or under the caller's lock); jobs finish on the worker.
     """
 
     def __init__(self, config: LocalRunnerConfig, refine: RefineFn | None = None, *,
                  submit: Callable[[Callable[[], SegmentResult]], Future] | None = None,
-                 synchronous: bool = False) -> None:
+                 synchronous: bool = False, worker_nice: int = 0) -> None:
+        from ecahd_core.threads import lower_priority
+
         self.config = config
         self.refine = refine
         self._pool = None
         if submit is None and not synchronous:
-            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="local_stage")
+            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="local_stage",
+                                            initializer=lower_priority,
+                                            initargs=(worker_nice,))
             submit = self._pool.submit
         self._submit = submit or _run_now
         self._lock = threading.Lock()

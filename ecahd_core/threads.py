@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import os
+import threading
 
 log = logging.getLogger("ecahd.threads")
 
@@ -48,3 +49,26 @@ def add_threads_argument(parser, default: int | None = INFERENCE_THREADS) -> Non
     parser.add_argument("--threads", type=int, default=default,
                         help="torch threads of this process (inference: 1 keeps a busy CPU "
                              "from being oversubscribed; default for training: all cores)")
+
+
+def lower_priority(increment: int) -> int | None:
+    """Raise the nice value of the calling thread by ``increment`` (0..19), so that the work
+    running there yields the CPU to a node's control timer on a busy computer. On Linux the
+    nice value belongs to each thread, and threads started afterwards from this one inherit
+    it. Lowering priority needs no privilege; raising it back does, so it is for threads that
+    keep the lower priority. Returns the new nice value, or None for 0 or where the system
+    refused or has no such call."""
+    if isinstance(increment, bool) or not isinstance(increment, int) or not 0 <= increment <= 19:
+        from ecahd_core.errors import EcahdError
+
+        raise EcahdError(f"a nice increment must be an integer in 0..19, got {increment!r}")
+    if increment == 0:
+        return None
+    try:
+        tid = threading.get_native_id()
+        nice = min(19, os.getpriority(os.PRIO_PROCESS, tid) + increment)
+        os.setpriority(os.PRIO_PROCESS, tid, nice)
+        return nice
+    except (AttributeError, OSError) as exc:  # not Linux, or not allowed
+        log.debug("nice +%d not applied: %s", increment, exc)
+        return None

@@ -21,6 +21,8 @@ class LatestWorker:
         fn: the work; called on the worker thread, one item at a time.
         name: the thread's name.
         on_error: called with any exception ``fn`` raises (the worker goes on).
+        nice: the worker thread's nice value is raised by this much (``threads.lower_priority``)
+            so that its work yields the CPU to the node's timers; 0 leaves it.
     Attributes:
         dropped: items replaced by a newer one before their turn.
         done: items ``fn`` finished (raised or not).
@@ -29,8 +31,8 @@ class LatestWorker:
     _STOP = object()
 
     def __init__(self, fn: Callable[[Any], None], *, name: str,
-                 on_error: Callable[[BaseException], None]) -> None:
-        self.fn, self.on_error = fn, on_error
+                 on_error: Callable[[BaseException], None], nice: int = 0) -> None:
+        self.fn, self.on_error, self.nice = fn, on_error, nice
         self.dropped = self.done = 0
         self._cond = threading.Condition()
         self._item: Any = None
@@ -70,6 +72,9 @@ class LatestWorker:
             self._thread.join(timeout)
 
     def _run(self) -> None:
+        from ecahd_core.threads import lower_priority
+
+        lower_priority(self.nice)
         while True:
             with self._cond:
                 self._cond.wait_for(lambda: self._has_item or self._closed)

@@ -44,6 +44,9 @@ Parameters (read-only, declared in :data:`PARAMETERS`):
     torch_threads (int, 1): torch.set_num_threads.
     inference_precision (str, "auto"): fp32, bf16, or auto (bf16 where the CPU has native
         bfloat16): the SD Transformer's encoder layers (``SamplerConfig.precision``).
+    nice (int, 0): the nice value of the thread that spins the node (and plans) is raised by
+        this much at start-up, so that planning yields the CPU to the controller on a busy
+        computer.
 A parameter out of range, an unknown robot or an unreadable model ends the node at start-up
 with one error line and exit code 1 (``ecahd_ros.spin``).
 
@@ -129,6 +132,9 @@ PARAMETERS = [
     ParamSpec("inference_precision", "auto", f"sd: the SD Transformer computes in one of "
                                              f"{list(PRECISIONS)} (auto: bf16 where the CPU has "
                                              f"native bfloat16, AVX512-BF16 or AMX)"),
+    ParamSpec("nice", 0, "nice increment of the thread that plans, so that planning yields "
+                         "the CPU to the controller on a busy computer; 0 = unchanged (5 "
+                         "changed no closed-loop figure, docs/RESULTS.md)"),
     *shared("seed", "torch_threads"),
 ]
 
@@ -162,10 +168,12 @@ class GlobalPlannerParams:
     seed: int
     torch_threads: int
     inference_precision: str
+    nice: int
 
     def __post_init__(self) -> None:
         require_positive(self, "num_candidates", "epsilon", "waypoint_tolerance",
                          "torch_threads")
+        require(0 <= self.nice <= 19, "nice", self.nice, "in 0..19")
         require(self.inference_precision in PRECISIONS, "inference_precision",
                 self.inference_precision, f"one of {list(PRECISIONS)}")
         require_non_negative(self, "ddim_steps", "footprint_padding", "seed", "replan_timeout",
@@ -232,11 +240,12 @@ class GlobalPlanner(Node):
             check_model(p.method, p.map_name,
                         path=(p.sd_model if p.method == "sd" else p.fd_model) or None,
                         footprint=self.footprint, horizon=p.horizon if p.method == "sd" else None)
-        from ecahd_core.threads import set_torch_threads
+        from ecahd_core.threads import lower_priority, set_torch_threads
 
         import torch
 
         set_torch_threads(p.torch_threads)
+        lower_priority(p.nice)  # this thread spins the executor: SD and A* run on it
         self.generator = torch.Generator().manual_seed(p.seed)
         self.grid = None
         self.sparse: SparseDiffusion | None = None  # method sd

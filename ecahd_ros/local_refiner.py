@@ -102,6 +102,10 @@ PARAMETERS = [
                                    "into walls"),
     ParamSpec("control_rate", 20.0, "[Hz] cmd_vel rate (Nav2's controller_frequency default)"),
     ParamSpec("prepare_ahead", 2, "segments refined ahead of the one being followed"),
+    ParamSpec("worker_nice", 0, "nice increment of the worker threads (local stage, scan "
+                                "fusion, map), so that their work yields the CPU to the control "
+                                "timer; 0 = the process's priority (5 changed no closed-loop "
+                                "figure, docs/RESULTS.md)"),
     ParamSpec("max_v", 0.5, "[m/s] limit on |linear velocity| (dynamic)"),
     ParamSpec("max_w", 1.5, "[rad/s] limit on |angular velocity| (dynamic)"),
     ParamSpec("max_accel", 1.0, "[m/s^2] limit on |linear acceleration| (dynamic)"),
@@ -183,6 +187,7 @@ class LocalRefinerParams:
     exact_check: bool
     control_rate: float
     prepare_ahead: int
+    worker_nice: int
     max_v: float
     max_w: float
     max_accel: float
@@ -226,6 +231,7 @@ class LocalRefinerParams:
         require_positive(self, "local_costmap_size", "local_costmap_rate",
                          "monitor_time_to_collision", "monitor_source_timeout",
                          "monitor_yield_horizon")
+        require(0 <= self.worker_nice <= 19, "worker_nice", self.worker_nice, "in 0..19")
         require(0 < self.monitor_slowdown_ratio <= 1, "monitor_slowdown_ratio",
                 self.monitor_slowdown_ratio, "in (0, 1]")
         require(0 <= self.monitor_stop_margin <= self.monitor_slowdown_margin,
@@ -318,10 +324,10 @@ class LocalRefiner(Node):
         # long work off the executor thread (ecahd_core.worker): maps, scan fusion
         report = lambda exc: self.get_logger().error(str(exc))  # noqa: E731 (_guard logs)
         self._map_worker = LatestWorker(self._guard(self._build_world), name="map",
-                                        on_error=report)
+                                        on_error=report, nice=p.worker_nice)
         self._scan_worker = LatestWorker(self._guard(self._fuse_scan), name="scan",
-                                         on_error=report)
-        self.runner = LocalRunner(p.runner_config())
+                                         on_error=report, nice=p.worker_nice)
+        self.runner = LocalRunner(p.runner_config(), worker_nice=p.worker_nice)
         self._poses = PoseHistory(POSE_HISTORY)  # odometry by stamp, to place the scans
         self._pending_scan = None  # (Scan, monotonic time) waiting for its stamp's odometry
         self.world = None  # ecahd_core.sensing.LocalWorld once a map arrives (use_scan)

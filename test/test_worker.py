@@ -43,3 +43,40 @@ def test_an_error_is_reported_and_the_worker_goes_on():
     time.sleep(0.05)
     assert seen == ["good"]
 
+
+
+def _own_nice():
+    import os
+
+    return os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+
+
+def test_worker_threads_run_at_a_lower_priority_than_the_caller():
+    """nice: the worker's thread (and only it) yields the CPU to the node's timers."""
+    import pytest
+
+    from ecahd_core.errors import EcahdError
+    from ecahd_core.navigation import LocalRunner, LocalRunnerConfig
+    from ecahd_core.threads import lower_priority
+
+    before = _own_nice()
+    seen = []
+    worker = LatestWorker(lambda item: seen.append(_own_nice()), name="niced",
+                          on_error=lambda exc: None, nice=3)
+    worker.submit(1)
+    assert worker.wait_idle(5.0)
+    worker.close()
+    runner = LocalRunner(LocalRunnerConfig(), worker_nice=2)
+    job = runner._submit(_own_nice)
+    assert seen == [min(19, before + 3)] and job.result(5.0) == min(19, before + 2)
+    assert _own_nice() == before  # the calling thread keeps its priority
+
+    result = []
+    t = threading.Thread(target=lambda: result.append((lower_priority(4), _own_nice())))
+    t.start()
+    t.join()
+    assert result == [(min(19, before + 4), min(19, before + 4))]
+    assert lower_priority(0) is None and _own_nice() == before
+    for bad in (-1, 20, 1.5, True):
+        with pytest.raises(EcahdError, match="nice increment"):
+            lower_priority(bad)
