@@ -358,8 +358,6 @@ class DenseConfig:
         keep_better: our third rule, beyond the paper: when DD's plan costs more by J than the
             straight local plan it was asked to improve (DD can overshoot), keep the straight
             plan (polishing then starts from it). False is the paper's behaviour.
-        precision: "fp32", "bf16" or "auto": the DD Transformer's inference precision
-            (``SamplerConfig.precision``; ours).
     """
 
     points: int | None = None
@@ -376,7 +374,6 @@ class DenseConfig:
     polish_steps: int = 30
     polish_step_size: float = 0.05
     keep_better: bool = True
-    precision: str = "fp32"
 
     def __post_init__(self) -> None:
         self.polish_config()  # validates the polishing settings
@@ -510,7 +507,7 @@ class HierarchicalPlanner:
             self.dd = DiffusionSampler.from_checkpoint(dense_checkpoint, device=device, config=SamplerConfig(
                 num_steps=steps, eta=self.dense.eta, guidance_weight=self.dense.guidance_weight,
                 guide_last=self.dense.guide_last, max_guide_norm=self.dense.max_guide_norm,
-                guidance_space=self.dense.guidance_space, precision=self.dense.precision))
+                guidance_space=self.dense.guidance_space))
 
     def local_cost(self, segments: torch.Tensor, goals: torch.Tensor) -> torch.Tensor:
         """J's collision cost c^l of local plans. segments: (B, P^l, 2), goals: (B, 2) -> (B,)."""

@@ -51,6 +51,39 @@ def add_threads_argument(parser, default: int | None = INFERENCE_THREADS) -> Non
                              "from being oversubscribed; default for training: all cores)")
 
 
+PRECISIONS = ("fp32", "bf16")  # what the diffusion Transformers compute in
+PRECISION_CHOICES = ("auto",) + PRECISIONS  # "auto": bf16 where native_bf16()
+
+
+def native_bf16(device="cpu") -> bool:
+    """Whether ``device`` computes bfloat16 matrix products natively: a CPU with AVX512-BF16 or
+    AMX tiles, or a CUDA device that supports bfloat16."""
+    import torch
+
+    device = torch.device(device)
+    if device.type == "cuda":
+        return bool(torch.cuda.is_available() and torch.cuda.is_bf16_supported())
+    if device.type != "cpu":
+        return False
+    checks = ("_is_avx512_bf16_supported", "_is_amx_tile_supported")
+    return any(bool(getattr(torch.cpu, name, lambda: False)()) for name in checks)
+
+
+def resolve_precision(precision: str, device="cpu") -> str:
+    """"auto" -> "bf16" where :func:`native_bf16`, else "fp32"; "fp32" / "bf16" unchanged."""
+    if precision == "auto":
+        return "bf16" if native_bf16(device) else "fp32"
+    if precision not in PRECISIONS:
+        raise ValueError(f"precision must be one of {', '.join(PRECISION_CHOICES)}, "
+                         f"got {precision!r}")
+    return precision
+
+
+def add_precision_argument(parser, default: str, help: str) -> None:
+    """``--precision {auto,fp32,bf16}`` on a command."""
+    parser.add_argument("--precision", default=default, choices=PRECISION_CHOICES, help=help)
+
+
 def lower_priority(increment: int) -> int | None:
     """Raise the nice value of the calling thread by ``increment`` (0..19), so that the work
     running there yields the CPU to a node's control timer on a busy computer. On Linux the

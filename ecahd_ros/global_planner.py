@@ -82,13 +82,12 @@ from ecahd_core.errors import EcahdError, PlanningError
 from ecahd_core.navigation import (REPLAN_POLICIES, SNAP_DISTANCE, GlobalRunner,
                                    GlobalRunnerConfig, PlanRequest, validate_pose)
 from ecahd_core.planner import SELECTION_RULES, SparseConfig, SparseDiffusion, SparsePlan
+from ecahd_core.threads import PRECISION_CHOICES
 from ecahd_ros.conversions import msg_to_grid, timing_message, xy_to_path
 from ecahd_ros.params import (ParamSpec, declare_parameters, make_robot,
                               read_parameters, require, require_non_negative, require_positive,
                               shared)
 from ecahd_ros.qos import MAP_QOS, PLAN_QOS, STREAM_QOS, VIZ_QOS
-
-PRECISIONS = ("auto", "fp32", "bf16")
 from ecahd_ros.spin import spin_node
 
 METHODS = ("sd", "astar", "fd")  # ECAHD's Sparse Diffusion; the Table III baselines' planners
@@ -130,8 +129,8 @@ PARAMETERS = [
     ParamSpec("obstacle_memory", 60.0, "[s] obstacles the local costmap found are avoided "
                                        "by re-plans for this long unless seen gone"),
     ParamSpec("inference_precision", "auto", f"sd: the SD Transformer computes in one of "
-                                             f"{list(PRECISIONS)} (auto: bf16 where the CPU has "
-                                             f"native bfloat16, AVX512-BF16 or AMX)"),
+                                             f"{list(PRECISION_CHOICES)} (auto: bf16 where the "
+                                             f"CPU has native bfloat16, AVX512-BF16 or AMX)"),
     ParamSpec("nice", 0, "nice increment of the thread that plans, so that planning yields "
                          "the CPU to the controller on a busy computer; 0 = unchanged (5 "
                          "changed no closed-loop figure, docs/RESULTS.md)"),
@@ -174,8 +173,8 @@ class GlobalPlannerParams:
         require_positive(self, "num_candidates", "epsilon", "waypoint_tolerance",
                          "torch_threads")
         require(0 <= self.nice <= 19, "nice", self.nice, "in 0..19")
-        require(self.inference_precision in PRECISIONS, "inference_precision",
-                self.inference_precision, f"one of {list(PRECISIONS)}")
+        require(self.inference_precision in PRECISION_CHOICES, "inference_precision",
+                self.inference_precision, f"one of {list(PRECISION_CHOICES)}")
         require_non_negative(self, "ddim_steps", "footprint_padding", "seed", "replan_timeout",
                              "obstacle_memory", "clearance_margin", "max_spacing", "leg_repair")
         require(self.place_reach >= 0 or self.place_reach == -1, "place_reach",

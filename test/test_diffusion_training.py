@@ -18,9 +18,9 @@ from ecahd_core.diffusion.normalizer import Normalizer
 from ecahd_core.diffusion.sampler import sample
 from ecahd_core.diffusion.scheduler import DDIMScheduler, ScheduleConfig
 from ecahd_core.diffusion.training import (CHECKPOINT_VERSION, Checkpoint, TrainConfig,
-                                           load_checkpoint, native_bf16, resolve_precision,
-                                           train)
+                                           load_checkpoint, train)
 from ecahd_core.errors import CheckpointError, DatasetError
+from ecahd_core.threads import native_bf16, resolve_precision
 
 MAP_BOUNDS = (0.0, 0.0, 4.0, 4.0)  # [m] a 4 m x 4 m empty 'map'
 NORMALIZER = Normalizer.from_bounds(*MAP_BOUNDS)

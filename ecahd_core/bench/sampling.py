@@ -213,13 +213,11 @@ def format_table(r: SamplingBenchResult) -> str:
     for name, ms in r.sd_replan_ms.items():
         row(f"SD re-plan, h 9, {'from noise' if name == 'noise' else 'warm ' + name}", ms, None)
     row("guided DD, all 9 segments of a plan", r.dd_plan_ms, None)
-    kind = "native" if c.get("native_bf16") else "emulated: no AVX512-BF16/AMX"
     for key, name, fp32 in (("sd_best_of_10", "SD best-of-10", r.sd_best_of_10_ms),
                             ("dd_plan", "guided DD, 9 segments", r.dd_plan_ms)):
         if key in r.bf16_ms:
             ms = r.bf16_ms[key]
             row(f"{name}, bf16 ({fp32 / ms:.2f}x as fast)", ms, None)
-
     row("FD 100 points, unguided", r.fd_ms, p["fd_s"] * 1e3)
     row("FD 100 points, guided", r.fd_guided_ms, p["fd_guided_s"] * 1e3)
     row("one guided DD step (9 segments)", r.dd_step_ms, p["dd_step_ms"])
@@ -236,6 +234,7 @@ def format_table(r: SamplingBenchResult) -> str:
                  "collision-aware selection; warm f: started from the previous plan's rest, the "
                  "last f of the DDIM schedule")
     if r.bf16_ms:
+        kind = "native" if c.get("native_bf16") else "emulated: no AVX512-BF16/AMX"
         lines.append(f"bf16: SamplerConfig.precision, the Transformers' encoder layers in "
                      f"bfloat16 ({kind})")
     return "\n".join(lines)

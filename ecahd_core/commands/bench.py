@@ -25,7 +25,7 @@ from ecahd_core.bench import monitor as bench_monitor
 from ecahd_core.bench import replan as bench_replan
 from ecahd_core.bench.cost import CostBenchSettings
 from ecahd_core.errors import EcahdError
-from ecahd_core.threads import add_threads_argument, set_torch_threads
+from ecahd_core.threads import add_precision_argument, add_threads_argument, set_torch_threads
 
 
 @dataclass(frozen=True)
@@ -132,8 +132,7 @@ def _add_sd_quality_arguments(parser: argparse.ArgumentParser) -> None:
                         help="DDIM steps (default: the checkpoint's)")
     parser.add_argument("--eta", type=float, default=None,
                         help="DDIM eta (default: the SD planner's, SparseConfig.eta)")
-    parser.add_argument("--precision", default="fp32", choices=("auto", "fp32", "bf16"),
-                        help="the SD Transformer's inference precision")
+    add_precision_argument(parser, "fp32", "the SD Transformer's inference precision")
     parser.add_argument("--png", metavar="FILE", help="draw the first 8 plans")
     parser.add_argument("--json", metavar="FILE", help="also write the result as JSON to FILE")
 
@@ -206,9 +205,8 @@ def _add_planning_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--warm-fraction", type=float, default=d.warm_fraction, metavar="F",
                         help="HD every_waypoint: warm-start each re-plan from the previous plan, "
                              "running the last F (0..1) of the DDIM schedule (0: from noise)")
-    parser.add_argument("--precision", default=d.precision, choices=("auto", "fp32", "bf16"),
-                        help="the SD Transformer's inference precision (auto: bf16 where the "
-                             "CPU has native bfloat16)")
+    add_precision_argument(parser, d.precision, "the SD Transformer's inference precision "
+                                                "(auto: bf16 where the CPU has native bfloat16)")
     parser.add_argument("--max-spacing", type=float, default=d.max_spacing, metavar="M",
                         help="[m] waypoint spacing by distance: SD re-samples legs longer than "
                              "this between their ends (big maps; default: off, the paper's "

@@ -26,6 +26,7 @@ from pathlib import Path
 
 from ecahd_core.commands import add_map_arguments
 from ecahd_core.errors import EcahdError
+from ecahd_core.threads import add_precision_argument, resolve_precision
 from ecahd_core.viz import PlanFigure
 
 log = logging.getLogger("ecahd.plan")
@@ -68,9 +69,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="[m] SD/ECAHD: SD's waypoints in a wall move into free space within R "
                         "and legs crossing a wall get a placed midpoint (ours; 0: off; "
                         "default: on at 1 m for maps over 50 000 cells, off on smaller ones)")
-    p.add_argument("--precision", default="auto", choices=("auto", "fp32", "bf16"),
-                   help="the SD Transformer's inference precision (auto: bf16 where the CPU "
-                        "has native bfloat16, as global_planner's inference_precision)")
+    add_precision_argument(p, "auto", "the SD Transformer's inference precision (auto: bf16 "
+                                      "where the CPU has native bfloat16, as global_planner's "
+                                      "inference_precision)")
     p.add_argument("--candidates", type=int, default=10,
                    help="diffusion candidates sampled in one batch (best of N)")
     p.add_argument("--selection", default="collision_aware",
@@ -101,7 +102,6 @@ def run(args: argparse.Namespace) -> int:
     from ecahd_core.astar import clearance_for_footprint, path_length, planner_for
     from ecahd_core.collision import check_collision
     from ecahd_core.dataset import resample_by_arclength
-    from ecahd_core.diffusion import resolve_precision
     from ecahd_core.footprint import make_footprint
     from ecahd_core.maps import load_map
     from ecahd_core.viz import save_figures

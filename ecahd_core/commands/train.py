@@ -16,7 +16,8 @@ import logging
 import time
 from pathlib import Path
 
-from ecahd_core.threads import add_threads_argument, set_torch_threads, training_threads
+from ecahd_core.threads import (add_precision_argument, add_threads_argument, resolve_precision,
+                                set_torch_threads, training_threads)
 
 log = logging.getLogger("ecahd.train")
 
@@ -27,10 +28,10 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--steps-scale", type=float, default=1.0,
                    help="multiply every recipe's step count (and warm-up) by this")
     add_threads_argument(p, default=None)
-    p.add_argument("--precision", default="auto", choices=("auto", "fp32", "bf16"),
-                   help="bf16: forward pass under bfloat16 autocast (float32 weights); auto: "
-                        "bf16 where the device computes it natively (AVX512-BF16 / AMX CPUs, "
-                        "recent GPUs), fp32 elsewhere")
+    add_precision_argument(p, "auto", "bf16: forward pass under bfloat16 autocast (float32 "
+                                      "weights); auto: bf16 where the device computes it "
+                                      "natively (AVX512-BF16 / AMX CPUs, recent GPUs), fp32 "
+                                      "elsewhere")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -144,8 +145,6 @@ def _set_threads(n: int | None) -> None:
 def run(args: argparse.Namespace) -> int:
     from ecahd_core.dataset import ExpertDataset
 
-    from ecahd_core.diffusion import resolve_precision
-
     _set_threads(args.threads)
     precision = resolve_precision(args.precision, args.device)
     dataset = ExpertDataset.load(args.data)
@@ -172,7 +171,6 @@ def _clock(seconds_from_now: float) -> str:
 
 def run_all(args: argparse.Namespace) -> int:
     from ecahd_core.dataset import generate_dataset
-    from ecahd_core.diffusion import resolve_precision
     from ecahd_core.maps import load_map
     from ecahd_core.model_zoo import MODELS_DIR, MODELS_ENV, recipe, shipped_path
 

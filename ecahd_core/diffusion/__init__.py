@@ -20,9 +20,9 @@ from ecahd_core.diffusion.sampler import (DiffusionSampler, SampleOutput, Sample
                                           sample)
 from ecahd_core.diffusion.scheduler import (DDIMScheduler, DDIMStepOutput, NoiseSchedule,
                                             ScheduleConfig)
-from ecahd_core.diffusion.training import (PRECISIONS, Checkpoint, ModelKind, TrainConfig,
-                                           TrainResult, native_bf16, resolve_precision,
+from ecahd_core.diffusion.training import (Checkpoint, ModelKind, TrainConfig, TrainResult,
                                            load_checkpoint, train)
+from ecahd_core.threads import PRECISIONS, native_bf16, resolve_precision
 
 __all__ = [
     "START_GOAL", "apply_conditioning", "condition_mask", "expand_conditions",

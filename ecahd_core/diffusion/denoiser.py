@@ -290,8 +290,8 @@ class TransformerDenoiser(nn.Module):
         final LayerNorm directly with the arguments the modules would pass, skipping their
         per-call eligibility checks (~15% of an SD step on a CPU), so the output is bit for bit
         the module's in float32 (in bfloat16 after :meth:`set_inference_precision`: the layers
-        compute in it, the final LayerNorm in float32 again). Any other case (training, gradients, autocast, fast path disabled, hooks)
-        goes through the modules."""
+        compute in it, the final LayerNorm in float32 again). Any other case (training,
+        gradients, autocast, fast path disabled, hooks) goes through the modules."""
         if self.training or torch.is_grad_enabled() or torch.is_autocast_enabled() \
                 or not torch.backends.mha.get_fastpath_enabled():
             return self.encoder(h)
@@ -315,8 +315,8 @@ class TransformerDenoiser(nn.Module):
         """"fp32" or "bf16": the dtype of the encoder layers' fused inference kernel (weights
         copied to it once; embeddings, final LayerNorm and head stay float32; training and
         gradients always run float32). "auto": bf16 where the CPU computes it natively
-        (``training.native_bf16``). Returns the precision chosen."""
-        from ecahd_core.diffusion.training import resolve_precision
+        (``threads.native_bf16``). Returns the precision chosen."""
+        from ecahd_core.threads import resolve_precision
 
         device = next(self.parameters()).device
         precision = resolve_precision(precision, device)
@@ -335,6 +335,11 @@ class TransformerDenoiser(nn.Module):
         cached = self.__dict__.get("_fast_args")
         if cached is not None:
             return cached
+        dtype = self.inference_dtype
+
+        def cast(w: Tensor) -> Tensor:  # the kernel's weights in the inference dtype
+            return w.detach().to(dtype) if w.dtype != dtype else w
+
         layers = []
         for layer in self.encoder.layers:
             attn = layer.self_attn
@@ -342,11 +347,6 @@ class TransformerDenoiser(nn.Module):
                     and attn._qkv_same_embed_dim and layer.activation_relu_or_gelu
                     and layer.norm1.eps == layer.norm2.eps and attn.num_heads % 2 == 0):
                 return None
-            dtype = self.inference_dtype
-
-            def cast(w: Tensor) -> Tensor:
-                return w.detach().to(dtype) if w.dtype != dtype else w
-
             layers.append((
                 attn.embed_dim, attn.num_heads, cast(attn.in_proj_weight),
                 cast(attn.in_proj_bias), cast(attn.out_proj.weight), cast(attn.out_proj.bias),

@@ -61,34 +61,13 @@ from ecahd_core.diffusion.normalizer import Normalizer
 from ecahd_core.diffusion.scheduler import (DDIMScheduler, NoiseSchedule, ScheduleConfig,
                                             parse_choice)
 from ecahd_core.errors import CheckpointError, DatasetError
+from ecahd_core.threads import PRECISIONS
 
 log = logging.getLogger(__name__)
 
 CHECKPOINT_FORMAT = "ecahd-diffusion-checkpoint"
 CHECKPOINT_VERSION = 1
 _MAP_KEYS = ("map_name", "map_fingerprint")
-PRECISIONS = ("fp32", "bf16")
-
-
-def native_bf16(device: str | torch.device = "cpu") -> bool:
-    """Whether ``device`` computes bfloat16 matrix products natively: a CPU with AVX512-BF16 or
-    AMX tiles, or a CUDA device that supports bfloat16."""
-    device = torch.device(device)
-    if device.type == "cuda":
-        return bool(torch.cuda.is_available() and torch.cuda.is_bf16_supported())
-    if device.type != "cpu":
-        return False
-    checks = ("_is_avx512_bf16_supported", "_is_amx_tile_supported")
-    return any(bool(getattr(torch.cpu, name, lambda: False)()) for name in checks)
-
-
-def resolve_precision(precision: str, device: str | torch.device = "cpu") -> str:
-    """"auto" -> "bf16" where :func:`native_bf16`, else "fp32"; "fp32" / "bf16" unchanged."""
-    if precision == "auto":
-        return "bf16" if native_bf16(device) else "fp32"
-    if precision not in PRECISIONS:
-        raise ValueError(f"precision must be auto, {' or '.join(PRECISIONS)}, got {precision!r}")
-    return precision
 
 
 class ModelKind(str, Enum):
@@ -127,7 +106,7 @@ class TrainConfig:
             ``torch.autocast(bfloat16)`` (matrix products in bfloat16, weights, optimiser
             state and EMA in float32). On a CPU with native bfloat16 (AVX512-BF16 or AMX) a step
             of the SD recipe took 0.65x the float32 time (docs/RESULTS.md); without it,
-            bfloat16 is emulated and slower. :func:`resolve_precision` picks for "auto".
+            bfloat16 is emulated and slower. ``threads.resolve_precision`` picks for "auto".
     """
 
     steps: int
