@@ -183,6 +183,13 @@ def control_context() -> dict:
             "control_timeout_s": sim["control_timeout"]}
 
 
+def _control_clock(settings: NavigationBenchSettings) -> str:
+    """What local_refiner's control timer ran on (``ecahd_ros.demo`` chooses it)."""
+    clock = _overrides(settings, "local_refiner").get(
+        "control_clock", "steady" if settings.realtime_factor == 1 else "ros")
+    return "the steady wall clock" if clock == "steady" else "sim time"
+
+
 def _overrides(settings: NavigationBenchSettings, node: str) -> dict:
     return {name: value for n, name, value in settings.overrides if n == node}
 
@@ -319,7 +326,8 @@ def format_markdown(result: NavigationBenchResult) -> str:
                   for node, name, value in s.overrides)
         + f"; sim_bridge at {c['sim_rate_hz']:g} "
         f"steps per sim second, realtime factor {s.realtime_factor:g}; local_refiner control "
-        f"every {c['control_period_s']:g} s of sim time ({c['control_rate_hz']:g} Hz), "
+        f"every {c['control_period_s']:g} s ({c['control_rate_hz']:g} Hz) of "
+        f"{_control_clock(s)}, "
         f"|v| <= {c['max_v']:g} m/s, |w| <= {c['max_w']:g} rad/s, |dv/dt| <= "
         f"{c['max_accel']:g} m/s²; sim_bridge stops the robot {c['control_timeout_s']:g} s "
         f"after the last cmd_vel. An episode ends once the goal is held for "

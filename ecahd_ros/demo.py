@@ -169,7 +169,10 @@ def _node_parameters(config: DemoConfig, start) -> dict[str, dict]:
                        "realtime_factor": float(config.realtime_factor)},
         "global_planner": {**common, **{k: v for k, v in models.items() if k != "dd_model"},
                            **config.planner_params},
+        # the control timer on the steady clock as on a robot, unless the simulation runs off
+        # real time: then 20 Hz of wall time would not be 20 Hz of the robot's time
         "local_refiner": {**common, **{k: v for k, v in models.items() if k == "dd_model"},
+                          "control_clock": "steady" if config.realtime_factor == 1 else "ros",
                           **config.refiner_params},
     }
 

@@ -22,7 +22,8 @@ With ``dd_enabled`` false ("ECAHD w/o DD" of Table III, and the baselines' "no l
 J is still evaluated on each straight plan (the timing records keep c_before), DD never runs and
 no DD model is loaded; the exact check still applies.
 
-Controller (every 1 / control_rate s): pure pursuit within max_v, max_w and max_accel. Zero
+Controller (every 1 / control_rate s of ``control_clock``: steady wall time by default, as
+Nav2's controller_server; the tick reads the node's clock, sim time with use_sim_time): pure pursuit within max_v, max_w and max_accel. Zero
 velocity with no plan, odometry older than ``stale_timeout`` (or a plan older than
 ``plan_timeout`` when that is > 0), and once the goal (the plan's last point) is within
 ``goal_tolerance``; the plan is then dropped until a new one arrives.
@@ -68,6 +69,7 @@ from geometry_msgs.msg import Point, Twist, TwistStamped
 from nav_msgs.msg import OccupancyGrid, Odometry, Path
 from sensor_msgs.msg import LaserScan
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
@@ -101,6 +103,13 @@ PARAMETERS = [
                                    "DD, FD without a local planner) drive straight segments "
                                    "into walls"),
     ParamSpec("control_rate", 20.0, "[Hz] cmd_vel rate (Nav2's controller_frequency default)"),
+    ParamSpec("control_clock", "steady", "clock of the control timer: 'steady' (monotonic wall "
+                                         "time, as Nav2's controller_server loop: ticks stay "
+                                         "evenly spaced however /clock arrives) or 'ros' (the "
+                                         "node's clock, /clock with use_sim_time: for a "
+                                         "simulation running faster or slower than real "
+                                         "time). Either way the controller reads the node's "
+                                         "clock"),
     ParamSpec("prepare_ahead", 2, "segments refined ahead of the one being followed"),
     ParamSpec("worker_nice", 0, "nice increment of the worker threads (local stage, scan "
                                 "fusion, map), so that their work yields the CPU to the control "
@@ -164,6 +173,7 @@ PARAMETERS = [
                                            "crossers, 10 of 20 reached against 14)"),
     *shared("seed", "torch_threads"),
 ]
+CONTROL_CLOCKS = ("steady", "ros")
 POSE_HISTORY = 1.0  # [s] of odometry poses kept to place scans by their stamps
 SCAN_POSE_WAIT = 0.2  # [s] a scan waits at most this long for the odometry of its stamp
 DYNAMIC = ("max_v", "max_w", "max_accel", "lookahead", "waypoint_tolerance", "goal_tolerance",
@@ -186,6 +196,7 @@ class LocalRefinerParams:
     polish_steps: int
     exact_check: bool
     control_rate: float
+    control_clock: str
     prepare_ahead: int
     worker_nice: int
     max_v: float
@@ -231,6 +242,8 @@ class LocalRefinerParams:
         require_positive(self, "local_costmap_size", "local_costmap_rate",
                          "monitor_time_to_collision", "monitor_source_timeout",
                          "monitor_yield_horizon")
+        require(self.control_clock in CONTROL_CLOCKS, "control_clock", self.control_clock,
+                " or ".join(map(repr, CONTROL_CLOCKS)))
         require(0 <= self.worker_nice <= 19, "worker_nice", self.worker_nice, "in 0..19")
         require(0 < self.monitor_slowdown_ratio <= 1, "monitor_slowdown_ratio",
                 self.monitor_slowdown_ratio, "in (0, 1]")
@@ -355,8 +368,11 @@ class LocalRefiner(Node):
                                  callback_group=inputs)
         self.create_subscription(OccupancyGrid, "map", self._guard(self._on_map), MAP_QOS,
                                  callback_group=maps)
+        # steady: the sim steps /clock by 1 / rate_hz (20 ms), so a 20 Hz timer on sim time
+        # fires 40 or 60 ms apart; the robot's base wants commands evenly spaced
+        clock = Clock(clock_type=ClockType.STEADY_TIME) if p.control_clock == "steady" else None
         self._timer = self.create_timer(1.0 / p.control_rate, self._guard(self._on_control),
-                                        callback_group=control)
+                                        callback_group=control, clock=clock)
         if p.use_scan:
             sensing = MutuallyExclusiveCallbackGroup()
             self.create_subscription(LaserScan, "scan", self._guard(self._on_scan), SCAN_QOS,

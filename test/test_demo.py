@@ -71,3 +71,14 @@ def test_first_episode_reruns_one_episode_of_a_seeded_run_alone(tmp_path):
     assert files[0].read_text() == files_full[3].read_text()
     with pytest.raises(Exception, match="first_episode"):
         DemoConfig(out=tmp_path / "x", first_episode=-1)
+
+
+@pytest.mark.parametrize("factor, clock", [(1.0, "steady"), (4.0, "ros")])
+def test_refiner_control_timer_on_the_steady_clock_only_at_real_time(tmp_path, factor, clock):
+    from ecahd_ros.demo import _node_parameters
+
+    config = DemoConfig(out=tmp_path, realtime_factor=factor)
+    assert _node_parameters(config, START)["local_refiner"]["control_clock"] == clock
+    override = DemoConfig(out=tmp_path, realtime_factor=factor,
+                          refiner_params={"control_clock": "ros"})
+    assert _node_parameters(override, START)["local_refiner"]["control_clock"] == "ros"

@@ -214,9 +214,36 @@ def test_zero_at_the_goal_and_stamped_commands(rig):
     assert r.cmds[-1].header.frame_id == "base_link"
 
 
+@pytest.mark.parametrize("clock", ["steady", "ros"])
+def test_control_clock_steady_ticks_while_sim_time_stands_still(rig, clock):
+    """With use_sim_time and a /clock that stops: the steady control timer keeps publishing,
+    stamped with the (standing) sim time; the one on the node's clock stops with it."""
+    from rosgraph_msgs.msg import Clock
+
+    r = rig(use_sim_time=True, control_clock=clock, enable_stamped_cmd_vel=True)
+    clock_pub = r.probe.create_publisher(Clock, "/clock", 10)
+    r.spin_until(lambda: clock_pub.get_subscription_count() > 0)
+    msg = Clock()
+    msg.clock.sec = 7
+    clock_pub.publish(msg)
+    r.spin_until(lambda: r.node.get_clock().now().nanoseconds == 7 * 10**9)
+    before = len(r.cmds)
+    deadline = time.monotonic() + 0.5  # 10 periods of wall time, no sim time passing
+    while time.monotonic() < deadline:
+        r.executor.spin_once(timeout_sec=0.01)
+    ticks = len(r.cmds) - before
+    if clock == "steady":
+        assert ticks >= 5
+        assert all(c.header.stamp.sec == 7 for c in r.cmds[before:])
+    else:
+        assert ticks <= 1  # at most one that was due when the clock jumped to 7 s
+
+
 def test_bad_parameter_is_named():
     with pytest.raises(EcahdError, match="max_accel"):
         params(max_accel=0.0)
+    with pytest.raises(EcahdError, match="control_clock"):
+        params(control_clock="wall")
 
 
 # --------------------------------------------------------------------------- controller
