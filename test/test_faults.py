@@ -84,7 +84,8 @@ class ProcessGraph:
                            "realtime_factor": REALTIME_FACTOR,
                            "control_timeout": CONTROL_TIMEOUT, "publish_scan": False},
             "global_planner": dict(common),
-            "local_refiner": {**common, "control_rate": CONTROL_RATE},
+            # the sim runs at twice real time: control at 20 Hz of sim time, as ecahd demo does
+            "local_refiner": {**common, "control_rate": CONTROL_RATE, "control_clock": "ros"},
         }
         self.procs = {}
         self.starts = 0
