@@ -46,6 +46,10 @@ def main() -> None:
                          "(placement.WaypointPlacer, the SparseDiffusion's placer)")
     ap.add_argument("--leg-rounds", type=int, default=3,
                     help="with --place: rounds of leg repair (WaypointPlacer.repair; 0: off)")
+    ap.add_argument("--sd-repair", type=int, default=0, metavar="H",
+                    help="a segment still colliding after the local stage gets an SD plan of H "
+                         "waypoints between its ends (best of N, placed), whose legs get the "
+                         "local stage; twice at most (0: off)")
     ap.add_argument("--png", help="draw up to 8 segments still colliding after the local stage")
     args = ap.parse_args()
     torch.set_num_threads(1)
@@ -62,7 +66,8 @@ def main() -> None:
     gen = torch.Generator().manual_seed(0)
     rows = []  # (length [m], an end in a wall, straight free, local plan free)
     bad_ends = []  # (a, b) [m] of every segment still colliding after the local stage
-    free_plans = 0
+    free_plans = repaired_plans = 0
+    stats = {"tried": 0, "fixed": 0}
     shown = []  # (problem, segment, SD waypoints, trajectory, segment) still colliding
     for n, prob in enumerate(make_problems(grid, args.problems, seed=args.seed)):
         t0 = time.perf_counter()
@@ -79,10 +84,17 @@ def main() -> None:
             if not rows[-1][3] and len(shown) < 8:
                 shown.append((n, k, wp, plan.trajectory, seg))
         free = check_collision(plan.trajectory, fp, grid).collision_free
+        if not free and args.sd_repair:
+            repaired = all(sd_repair(sd, hd, grid, fp, seg, args.sd_repair, gen, stats)
+                           for seg in plan.segments)
+            repaired_plans += repaired
         free_plans += free
         print(f"SD path {np.linalg.norm(np.diff(wp, axis=0), axis=1).sum():6.1f} m, "
               f"{int(in_wall.sum())} of {len(wp)} waypoints in a wall, plan "
               f"{'free' if free else 'colliding'}, {ms:.0f} ms")
+    if args.sd_repair:
+        print(f"SD repair (H={args.sd_repair}): {repaired_plans} more plans collision-free; "
+              f"segments tried {stats['tried']}, cleared {stats['fixed']}")
     r = np.array(rows, dtype=float)
     print(f"\n{free_plans} of {args.problems} plans collision-free; {len(r)} segments, mean "
           f"length {r[:, 0].mean():.2f} m; a waypoint in a wall: {100 * r[:, 1].mean():.1f}%; "
@@ -118,6 +130,25 @@ def main() -> None:
           "their ends: " + ", ".join(f"{k}: {v}" for k, v in kinds.items()))
     if args.png:
         draw(grid, fp, shown, args.png)
+
+
+def sd_repair(sd, hd, grid, fp, seg, horizon: int, gen, stats, depth: int = 2) -> bool:
+    """``seg`` (P^l, 2) [m] if free, else SD between its ends and the local stage on its legs,
+    recursively: whether the result is collision-free."""
+    if check_collision(seg, fp, grid).collision_free:
+        return True
+    if depth == 0:
+        return False
+    stats["tried"] += 1
+    a, b = np.asarray(seg[0], dtype=np.float64), np.asarray(seg[-1], dtype=np.float64)
+    wp = sd.plan(a, b, horizon=horizon, generator=gen).waypoints
+    w = torch.as_tensor(wp, dtype=torch.float32)
+    stages = hd.local_stages(w[:-1], w[1:], end_fixed=torch.ones(len(w) - 1, dtype=torch.bool),
+                             joined=True, generator=gen)
+    ok = all(sd_repair(sd, hd, grid, fp, s.numpy(), horizon, gen, stats, depth - 1)
+             for s in stages.plans)
+    stats["fixed"] += ok
+    return ok
 
 
 def draw(grid, fp, shown, png: str) -> None:
