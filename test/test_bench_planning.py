@@ -25,6 +25,17 @@ def test_bench_planning_small(tmp_path):
     assert png.stat().st_size > 10_000
 
 
+def test_bench_planning_figure_on_a_nav2_yaml_map(tmp_path):
+    """--png reloads the map from the path given, not by its name (a YAML's name is its stem)."""
+    yaml_path, png = tmp_path / "small_depot.yaml", tmp_path / "p.png"
+    assert main(["map", "generate", "--kind", "depot", "--size", "12", "8", "--resolution", "0.05",
+                 "--seed", "3", "--out", str(yaml_path)]) == 0
+    assert main(["bench", "planning", "--map", str(yaml_path), "--problems", "2", "--methods",
+                 "astar", "--robots", "circle", "--no-ablation", "--no-progress",
+                 "--png", str(png)]) == 0
+    assert png.stat().st_size > 10_000
+
+
 def test_bench_defaults_follow_the_planner():
     # the bench module avoids importing torch at parser-build time, so it restates two defaults
     from ecahd_core.bench.planning import PlanningBenchSettings

@@ -279,7 +279,8 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                 variant = f"{mode}{' + dilation' if dilation else ''}"
                 cell, _ = run_cell("hd", True, "circle", cost_config=cc, variant=variant)
                 ablation.append(cell)
-    context = {"map": grid.name, "problems": len(problems), "seed": settings.seed,
+    context = {"map": grid.name, "map_source": settings.map, "problems": len(problems),
+               "seed": settings.seed,
                "sample_seed": settings.sample_seed, "candidates": settings.candidates,
                "selection": settings.selection,
                "guidance_weight": settings.guidance_weight, "c_th": settings.c_th,
@@ -393,7 +394,7 @@ def plot_examples(r: PlanningBenchResult, path, *, robot: str = "circle", proble
     from ecahd_core.maps import load_map
     from ecahd_core.viz import PlanFigure, save_figures
 
-    grid = load_map(r.context["map"])
+    grid = load_map(r.context.get("map_source", r.context["map"]))  # a YAML's path, not its name
     fp = make_footprint(robot)
     prob = r.problems[problem]
     figures = []
