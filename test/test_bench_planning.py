@@ -4,7 +4,8 @@ import json
 from ecahd_ros.cli import main
 
 KEYS = {"method", "guidance", "robot", "success", "success_final", "collision_free",
-        "collision_rate", "length_ratio", "time_ms_mean", "time_ms_p95", "dd_ratio"}
+        "collision_rate", "length_ratio", "time_ms_mean", "time_ms_median", "time_ms_p95",
+        "dd_ratio"}
 
 
 def test_bench_planning_small(tmp_path):

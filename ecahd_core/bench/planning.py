@@ -12,7 +12,7 @@ Metrics per cell:
 - ``collision_rate``: mean penetration fraction (share of densely interpolated poses whose
   footprint overlaps an obstacle), in %;
 - ``length_ratio``: mean path length / A* path length (same clearance-respecting A*);
-- ``time_ms_mean`` / ``time_ms_p95``: planning wall time per problem;
+- ``time_ms_mean`` / ``time_ms_median`` / ``time_ms_p95``: planning wall time per problem;
 - ``dd_ratio``: share of local segments where DD fired (HD methods).
 
 ``warm_fraction`` (``--warm-fraction``, ours): HD's every-waypoint re-plans start from the rest
@@ -106,6 +106,7 @@ class CellResult:
     collision_rate: float
     length_ratio: float
     time_ms_mean: float
+    time_ms_median: float
     time_ms_p95: float
     dd_ratio: float
     problems: int
@@ -118,6 +119,7 @@ class CellResult:
     net_unsafe_rate: float | None = None  # % of plans with no safe plan
     net_time_ms_mean: float | None = None  # planning + net
     net_time_ms_p95: float | None = None
+    net_time_ms_median: float | None = None
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -153,7 +155,8 @@ def _judge(paths, times, dd, problems, footprint, grid, *, method, guidance, rob
                       collision_free=100 * float(np.mean(free)),
                       collision_rate=100 * float(np.mean(pen)),
                       length_ratio=float(np.mean(ratio)),
-                      time_ms_mean=float(np.mean(times)), time_ms_p95=float(np.percentile(times, 95)),
+                      time_ms_mean=float(np.mean(times)), time_ms_median=float(np.median(times)),
+                      time_ms_p95=float(np.percentile(times, 95)),
                       dd_ratio=float(np.mean(dd)) if dd else 0.0, problems=len(problems))
 
 
@@ -257,6 +260,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
             cell.net_retry_rate, cell.net_fallback_rate = rate("retry"), rate("fallback")
             cell.net_unsafe_rate = rate("unsafe")
             cell.net_time_ms_mean, cell.net_time_ms_p95 = after.time_ms_mean, after.time_ms_p95
+            cell.net_time_ms_median = after.time_ms_median
             log.info("%s with the safety net: collision-free %.1f%%, retry %.1f%%, fallback "
                      "%.1f%%, unsafe %.1f%%, %.0f ms", label, cell.net_collision_free,
                      cell.net_retry_rate, cell.net_fallback_rate, cell.net_unsafe_rate,
@@ -348,13 +352,15 @@ def format_markdown(r: PlanningBenchResult) -> str:
     lines += ["", "All cells (A* is the classical reference; `success_free` = reaches the goal "
               "and is collision-free):", "",
               "| method | guidance | robot | success % | final ≤0.5 m % | success & free % | "
-              "collision-free % | collision rate % | length / A* | time mean ms | time p95 ms | DD ratio |",
-              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+              "collision-free % | collision rate % | length / A* | time mean ms | time median ms | "
+              "time p95 ms | DD ratio |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for x in r.cells:
         lines.append(f"| {METHOD_LABELS[x.method]} | {'✓' if x.guidance else '×'} | {x.robot} | "
                      f"{x.success:.1f} | {x.success_final:.1f} | {x.success_free:.1f} | "
                      f"{x.collision_free:.1f} | {x.collision_rate:.4f} | {x.length_ratio:.3f} | "
-                     f"{x.time_ms_mean:.1f} | {x.time_ms_p95:.1f} | {x.dd_ratio:.3f} |")
+                     f"{x.time_ms_mean:.1f} | {x.time_ms_median:.1f} | {x.time_ms_p95:.1f} | "
+                     f"{x.dd_ratio:.3f} |")
     netted = [x for x in r.cells if x.net_collision_free is not None]
     if netted:
         lines += ["", f"The safety net (ours, beyond the paper; DD retries "
@@ -362,8 +368,8 @@ def format_markdown(r: PlanningBenchResult) -> str:
                   "paths without / with the net. Retry, fallback and unsafe: share of plans where "
                   "that rule acted last.", "",
                   "| method | guidance | robot | collision-free % | success & free % | retry % | "
-                  "fallback % | unsafe % | time mean ms | time p95 ms |",
-                  "|---|---|---|---|---|---|---|---|---|---|"]
+                  "fallback % | unsafe % | time mean ms | time median ms | time p95 ms |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|"]
         for x in netted:
             lines.append(
                 f"| {METHOD_LABELS[x.method]}{' (ECAHD)' if x.guidance else ''} | "
@@ -372,6 +378,7 @@ def format_markdown(r: PlanningBenchResult) -> str:
                 f"{x.success_free:.1f} → {x.net_success_free:.1f} | {x.net_retry_rate:.1f} | "
                 f"{x.net_fallback_rate:.1f} | {x.net_unsafe_rate:.1f} | "
                 f"{x.time_ms_mean:.1f} → {x.net_time_ms_mean:.1f} | "
+                f"{x.time_ms_median:.1f} → {x.net_time_ms_median:.1f} | "
                 f"{x.time_ms_p95:.1f} → {x.net_time_ms_p95:.1f} |")
     if r.ablation:
         lines += ["", "Table II ablation (ECAHD, circle robot): how J reads the cost map. "
