@@ -230,6 +230,15 @@ class SparseDiffusion:
                           collision_costs=col, time_ms=(time.perf_counter() - t0) * 1e3,
                           placed=placed)
 
+    def warm_up(self, xy, *, horizon: int | None = None) -> float:
+        """One throwaway plan from ``xy`` (2,) [m] to itself with its own generator, so that the
+        first real plan does not pay torch's first-call costs (kernel set-up, bfloat16 weight
+        copies, J's first sweep). Returns its wall time [ms]."""
+        t0 = time.perf_counter()
+        self.plan(xy, xy, horizon=horizon, generator=torch.Generator().manual_seed(0),
+                  densify=False)
+        return (time.perf_counter() - t0) * 1e3
+
     def _place(self, waypoints: np.ndarray) -> tuple[np.ndarray, int]:
         """(P, 2) [m] -> (waypoints with those in a wall moved by ``placer``, how many moved);
         unchanged without a placer."""

@@ -312,7 +312,7 @@ def run_demo(config: DemoConfig) -> DemoResult:
     from ecahd_core.navigation import SNAP_DISTANCE
     from ecahd_ros.bag_recorder import BagRecorder
     from ecahd_ros.eval_bag import evaluate_bag, write_outputs
-    from ecahd_ros.qos import PLAN_QOS, STREAM_QOS
+    from ecahd_ros.qos import MAP_QOS, PLAN_QOS, STREAM_QOS
 
     start, goals = _goals(config)
     config.out.mkdir(parents=True, exist_ok=True)
@@ -335,7 +335,7 @@ def run_demo(config: DemoConfig) -> DemoResult:
         procs += [NodeProcess(name, params[name], domain=domain, out=config.out)
                   for name in NODE_MODULES]
         goal_pub = demo.create_publisher(PoseStamped, "goal_pose", STREAM_QOS)
-        state = {"odom": None, "cmd": None, "refiner_ready": False}
+        state = {"odom": None, "cmd": None, "refiner_ready": False, "planner_ready": False}
         # goal -> first plan latency of the current episode: goal (x, y), perf_counter when it
         # was published, the latency [ms] once its first plan arrived
         latency = {"goal": None, "sent": 0.0, "ms": None}
@@ -367,6 +367,8 @@ def run_demo(config: DemoConfig) -> DemoResult:
         demo.create_subscription(Twist, "cmd_vel", on_cmd, STREAM_QOS)
         demo.create_subscription(String, "ecahd/timing", on_timing, STREAM_QOS)
         demo.create_subscription(PathMsg, "plan", on_plan, PLAN_QOS)
+        demo.create_subscription(String, "ecahd/planner_ready",
+                                 lambda _: state.update(planner_ready=True), MAP_QOS)
         goal_to_plan: list[float | None] = []
         executor = SingleThreadedExecutor(context=ctx)
         for node in nodes:
@@ -377,15 +379,18 @@ def run_demo(config: DemoConfig) -> DemoResult:
             for proc in procs:
                 proc.check()
 
-        # start-up: processes up, the refiner's cost map (and DD) on the latched map, the
-        # planner listening for goals (it queues one until its model is loaded), all recorded
+        # start-up: processes up, the refiner's cost map (and DD) and the planner's model on
+        # the latched map (a goal before then would wait for it, and episode 0's goal -> plan
+        # latency would be start-up time), the planner listening for goals, all recorded
         t0 = time.monotonic()
-        while not (state["refiner_ready"] and state["odom"] is not None
+        while not (state["refiner_ready"] and state["planner_ready"]
+                   and state["odom"] is not None
                    and not recorder.pending_topics and goal_pub.get_subscription_count() >= 2):
             spin()
             if time.monotonic() - t0 > STARTUP_TIMEOUT:
                 raise EcahdError(f"start-up took over {STARTUP_TIMEOUT:g} s: refiner ready "
-                                 f"{state['refiner_ready']}, odometry "
+                                 f"{state['refiner_ready']}, planner ready "
+                                 f"{state['planner_ready']}, odometry "
                                  f"{state['odom'] is not None}, recorder still waiting for "
                                  f"{recorder.pending_topics} (logs: {config.out / 'logs'})")
         log.info("graph ready in %.1f s (domain %d, one process per node); %d episodes",

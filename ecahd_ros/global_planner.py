@@ -65,6 +65,10 @@ Publishes:
         candidates as line strips (grey), the chosen one highlighted (purple, wider).
     ecahd/timing (std_msgs/String; reliable, depth 10): JSON ``{"stage": "sd" | "astar" | "fd",
         "ms": <float>, "horizon": <int, points of the plan>, "stamp": <float s>}``, one per plan.
+    ecahd/planner_ready (std_msgs/String; reliable, transient_local, depth 1): JSON ``{"map":
+        <name>, "method": <method>, "ms": <float, building the planner for the map, a warm-up
+        SD plan included>}`` once a map's planner is built: a goal sent before then waits for
+        it (``ecahd demo`` waits for this before its first goal).
 """
 from __future__ import annotations
 
@@ -255,6 +259,7 @@ class GlobalPlanner(Node):
         self._plan_pub = self.create_publisher(Path, "plan", PLAN_QOS)
         self._cand_pub = self.create_publisher(MarkerArray, "plan_candidates", VIZ_QOS)
         self._timing_pub = self.create_publisher(String, "ecahd/timing", STREAM_QOS)
+        self._ready_pub = self.create_publisher(String, "ecahd/planner_ready", MAP_QOS)
         self.create_subscription(OccupancyGrid, "map", self._guard(self._on_map), MAP_QOS)
         self.create_subscription(PoseStamped, "goal_pose", self._guard(self._on_goal),
                                  STREAM_QOS)
@@ -310,10 +315,14 @@ class GlobalPlanner(Node):
         if msg.header.frame_id != p.global_frame:
             raise EcahdError(f"map in frame {msg.header.frame_id!r} ignored: expected "
                              f"{p.global_frame!r}")
+        t0 = time.perf_counter()
         grid = msg_to_grid(msg, name=p.map_name)
         sparse = astar = fd = None
+        warm = ""
         if p.method == "sd":
             sparse = self._build_sd(grid)
+            x0, y0, x1, y1 = grid.bounds  # the first real plan then costs what later ones do
+            warm = f", warm-up plan {sparse.warm_up((0.5 * (x0 + x1), 0.5 * (y0 + y1))):.0f} ms"
         elif p.method == "astar":
             from ecahd_core.astar import clearance_for_footprint, planner_for
 
@@ -326,8 +335,13 @@ class GlobalPlanner(Node):
         self.memory = ObstacleMemory(grid, p.obstacle_memory)
         self._static_cost = sparse.cost if sparse is not None else None
         self._placer_cache = None  # a new map: a new distance transform
+        ms = (time.perf_counter() - t0) * 1e3
         self.get_logger().info(f"map {grid.name!r} received ({grid.width} x {grid.height} "
-                               f"cells); {p.method} planner built")
+                               f"cells); {p.method} planner built in {ms:.0f} ms{warm}")
+        import json
+
+        self._ready_pub.publish(String(data=json.dumps(
+            {"map": grid.name, "method": p.method, "ms": round(ms, 1)})))
         if self.runner.goal is not None:
             self.runner.set_goal(self.runner.goal)  # plan again on the new map
             self._step()

@@ -132,6 +132,18 @@ def test_goal_gives_a_plan_from_the_robot_to_the_goal(rig):
     assert math.isfinite(timing["stamp"])
 
 
+def test_planner_ready_is_latched_once_the_map_is_built(rig):
+    """ecahd/planner_ready: once per map, after the planner (and its warm-up plan) is built;
+    a subscriber that comes later still gets it (ecahd demo waits for it)."""
+    r = rig()
+    ready(r)
+    got = []
+    r.probe.create_subscription(String, "ecahd/planner_ready", got.append, MAP_QOS)
+    r.spin_until(lambda: got)
+    record = json.loads(got[-1].data)
+    assert record["map"] == "maze2d-large" and record["method"] == "sd" and record["ms"] > 0
+
+
 @pytest.mark.parametrize("goal,frame", [
     ((0.5, 0.5), "map"),  # inside the outer wall
     ((50.0, 50.0), "map"),  # off the map
