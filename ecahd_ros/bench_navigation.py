@@ -184,9 +184,12 @@ def control_context() -> dict:
 
 
 def _control_clock(settings: NavigationBenchSettings) -> str:
-    """What local_refiner's control timer ran on (``ecahd_ros.demo`` chooses it)."""
+    """What local_refiner's control timer ran on (``ecahd_ros.demo.control_clock`` unless
+    overridden)."""
+    from ecahd_ros.demo import control_clock
+
     clock = _overrides(settings, "local_refiner").get(
-        "control_clock", "steady" if settings.realtime_factor == 1 else "ros")
+        "control_clock", control_clock(settings.realtime_factor))
     return "the steady wall clock" if clock == "steady" else "sim time"
 
 

@@ -152,6 +152,13 @@ def add_obstacle_arguments(p: argparse.ArgumentParser) -> None:
                         "run from episode 0): rerun one episode of a long run alone")
 
 
+def control_clock(realtime_factor: float) -> str:
+    """local_refiner's ``control_clock`` for a simulation at ``realtime_factor``: the steady
+    clock as on a robot at real time; off real time, sim time ("ros"), since 20 Hz of wall time
+    would not be 20 Hz of the robot's time."""
+    return "steady" if realtime_factor == 1 else "ros"
+
+
 def _node_parameters(config: DemoConfig, start) -> dict[str, dict]:
     """Each node's parameters (name -> value) for its params file."""
     from ecahd_core.maps import load_map
@@ -169,10 +176,8 @@ def _node_parameters(config: DemoConfig, start) -> dict[str, dict]:
                        "realtime_factor": float(config.realtime_factor)},
         "global_planner": {**common, **{k: v for k, v in models.items() if k != "dd_model"},
                            **config.planner_params},
-        # the control timer on the steady clock as on a robot, unless the simulation runs off
-        # real time: then 20 Hz of wall time would not be 20 Hz of the robot's time
         "local_refiner": {**common, **{k: v for k, v in models.items() if k == "dd_model"},
-                          "control_clock": "steady" if config.realtime_factor == 1 else "ros",
+                          "control_clock": control_clock(config.realtime_factor),
                           **config.refiner_params},
     }
 

@@ -72,6 +72,7 @@ Publishes:
 """
 from __future__ import annotations
 
+import json
 import time
 from dataclasses import dataclass
 
@@ -338,8 +339,6 @@ class GlobalPlanner(Node):
         ms = (time.perf_counter() - t0) * 1e3
         self.get_logger().info(f"map {grid.name!r} received ({grid.width} x {grid.height} "
                                f"cells); {p.method} planner built in {ms:.0f} ms{warm}")
-        import json
-
         self._ready_pub.publish(String(data=json.dumps(
             {"map": grid.name, "method": p.method, "ms": round(ms, 1)})))
         if self.runner.goal is not None:
@@ -413,8 +412,6 @@ class GlobalPlanner(Node):
 
     def _on_replan(self, msg: String) -> None:
         """The refiner cannot follow the plan (a segment blocked by a scanned obstacle)."""
-        import json
-
         try:
             reason = str(json.loads(msg.data).get("reason", "blocked"))
         except (ValueError, AttributeError):

@@ -23,10 +23,11 @@ J is still evaluated on each straight plan (the timing records keep c_before), D
 no DD model is loaded; the exact check still applies.
 
 Controller (every 1 / control_rate s of ``control_clock``: steady wall time by default, as
-Nav2's controller_server; the tick reads the node's clock, sim time with use_sim_time): pure pursuit within max_v, max_w and max_accel. Zero
-velocity with no plan, odometry older than ``stale_timeout`` (or a plan older than
-``plan_timeout`` when that is > 0), and once the goal (the plan's last point) is within
-``goal_tolerance``; the plan is then dropped until a new one arrives.
+Nav2's controller_server; the tick reads the node's clock, sim time with use_sim_time): pure
+pursuit within max_v, max_w and max_accel. Zero velocity with no plan, odometry older than
+``stale_timeout`` (or a plan older than ``plan_timeout`` when that is > 0), and once the goal
+(the plan's last point) is within ``goal_tolerance``; the plan is then dropped until a new one
+arrives.
 
 Every message is validated before it changes state: a plan in another frame, with non-finite or
 off-map poses or more than 100 000 poses, NaN odometry, a malformed map: one error line, the
@@ -243,7 +244,7 @@ class LocalRefinerParams:
                          "monitor_time_to_collision", "monitor_source_timeout",
                          "monitor_yield_horizon")
         require(self.control_clock in CONTROL_CLOCKS, "control_clock", self.control_clock,
-                " or ".join(map(repr, CONTROL_CLOCKS)))
+                f"one of {list(CONTROL_CLOCKS)}")
         require(0 <= self.worker_nice <= 19, "worker_nice", self.worker_nice, "in 0..19")
         require(0 < self.monitor_slowdown_ratio <= 1, "monitor_slowdown_ratio",
                 self.monitor_slowdown_ratio, "in (0, 1]")
