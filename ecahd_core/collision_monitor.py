@@ -15,7 +15,10 @@ Every command (v, w) is checked before it reaches the base:
    would be collision free: a point that close means the scan, the pose or the plan is wrong,
    and the planner, not the filter, should decide how to get out.
 4. Else if at least ``min_points`` static points come within ``slowdown_margin`` at some step ->
-   **slowdown**: v and w are scaled by ``slowdown_ratio`` and the slowed command is checked
+   **slowdown**: v and w are scaled by ``slowdown_ratio`` (``slowdown_profile`` "step", Nav2's
+   polygon), or by a ratio that grows linearly from ``slowdown_ratio`` at ``stop_margin`` to 1
+   at ``slowdown_margin`` with the static points' least clearance over the horizon ("linear",
+   ours: passing a box 0.25 m away is not crawling past it), and the slowed command is checked
    again (step 3; stop if it fails).
 5. Else the command passes unchanged ("none").
 
@@ -58,6 +61,7 @@ from ecahd_core.footprint import Footprint
 from ecahd_core.local_costmap import check_real
 
 ACTIONS = ("none", "slowdown", "stop", "yield")
+SLOWDOWN_PROFILES = ("linear", "step")
 _ESCAPE_V = (-1.0, -0.5, 0.0, 0.5, 1.0)  # escape commands' v as fractions of max_v
 _ESCAPE_W = (-0.5, 0.0, 0.5)  # ... and w as fractions of max_w
 _OWNER = "collision monitor"
@@ -96,6 +100,12 @@ class CollisionMonitorConfig:
         sim_dt: [s] simulation step (Nav2 ``simulation_time_step``).
         slowdown_ratio: factor in (0, 1] applied to v and w on a slowdown.
         slowdown_margin: [m] points within this distance of the footprint slow the robot.
+        slowdown_profile: "linear" (default): the slowdown's ratio is ``slowdown_ratio`` for a
+            least clearance c (the static points' nearest approach to the footprint over the
+            horizon) at ``stop_margin`` and grows linearly to 1 at ``slowdown_margin``; "step":
+            ``slowdown_ratio`` whatever c (Nav2's slowdown polygon). With "step" the robot
+            crawled at 0.15 m/s beside every box it passed: 78% of the control ticks of a
+            depot episode with 5 boxes (docs/RESULTS.md).
         stop_margin: [m] points within this distance of the footprint stop the robot
             (<= slowdown_margin).
         min_points: points needed to trigger an action (Nav2 ``min_points``).
@@ -132,6 +142,7 @@ class CollisionMonitorConfig:
     sim_dt: float = 0.1
     slowdown_ratio: float = 0.3
     slowdown_margin: float = 0.3
+    slowdown_profile: str = "linear"
     stop_margin: float = 0.02
     min_points: int = 1
     source_timeout: float = 2.0
@@ -156,6 +167,9 @@ class CollisionMonitorConfig:
         for name in ("slowdown_margin", "stop_margin", "source_timeout", "prediction_growth",
                      "static_horizon", "beat_horizon"):
             check_real(_OWNER, name, getattr(self, name), zero_ok=True)
+        if self.slowdown_profile not in SLOWDOWN_PROFILES:
+            raise EcahdError(f"slowdown_profile must be one of {list(SLOWDOWN_PROFILES)}, got "
+                             f"{self.slowdown_profile!r}")
         if self.slowdown_ratio > 1:
             raise EcahdError(f"slowdown_ratio must be in (0, 1], got {self.slowdown_ratio!r}")
         if self.stop_margin > self.slowdown_margin:
@@ -356,10 +370,11 @@ class CollisionMonitor:
         # the simulated ones, where no footprint point is farther than
         # (|v| + |w| R_circumscribed) sim_dt from a simulated pose's: only points within that
         # much of the stop margin at some step can stop the slowed command.
+        ratio = self.slowdown_ratio_at(float(clearance[:, still].min()))
         if cfg.slowdown_limits is None:
-            v_slow, w_slow = v * cfg.slowdown_ratio, w * cfg.slowdown_ratio
+            v_slow, w_slow = v * ratio, w * ratio
         else:  # a cap: |v_slow| <= |v| and |w_slow| <= |w| as for the ratio
-            cap_v, cap_w = (cfg.slowdown_ratio * float(m) for m in cfg.slowdown_limits)
+            cap_v, cap_w = (ratio * float(m) for m in cfg.slowdown_limits)
             v_slow, w_slow = float(np.clip(v, -cap_v, cap_v)), float(np.clip(w, -cap_w, cap_w))
         step = (abs(v) + abs(w) * self.footprint.circumscribed_radius) * cfg.sim_dt  # [m]
         # (a moving point is where it is at a time, not on the arc: every one is re-checked)
@@ -380,8 +395,18 @@ class CollisionMonitor:
         return MonitorResult(float(v_slow), float(w_slow), "slowdown", math.inf,
                              f"point(s) within {cfg.slowdown_margin} m of the footprint in "
                              f"{float(self._t[slow_step]):.2f} s: speed x "
-                             f"{cfg.slowdown_ratio}"
+                             f"{ratio:.2f}"
                              + ("" if cfg.slowdown_limits is None else " of the limits"))
+
+    def slowdown_ratio_at(self, clearance: float) -> float:
+        """The slowdown's speed ratio for the static points' least clearance [m] to the
+        footprint over the horizon (``slowdown_profile``)."""
+        cfg = self.config
+        if cfg.slowdown_profile == "step":
+            return cfg.slowdown_ratio
+        span = cfg.slowdown_margin - cfg.stop_margin
+        frac = 1.0 if span <= 0 else min(max((clearance - cfg.stop_margin) / span, 0.0), 1.0)
+        return cfg.slowdown_ratio + (1.0 - cfg.slowdown_ratio) * frac
 
     # ------------------------------------------------------------------------------- yield
     def _beat_step(self, pose: np.ndarray, v: float, w: float, pts: np.ndarray,

@@ -75,6 +75,7 @@ from rclpy.node import Node
 from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
+from ecahd_core.collision_monitor import SLOWDOWN_PROFILES
 from ecahd_core.errors import EcahdError
 from ecahd_core.navigation import (LocalRunner, LocalRunnerConfig, SegmentResult,
                                    judge_items)
@@ -151,7 +152,14 @@ PARAMETERS = [
     ParamSpec("monitor_stop_margin", 0.02, "[m] footprint growth that stops the robot"),
     ParamSpec("monitor_slowdown_margin", 0.3, "[m] footprint growth that slows the robot down"),
     ParamSpec("monitor_slowdown_ratio", 0.3, "slowing down caps |v| and |w| at this times "
-                                             "max_v and max_w"),
+                                             "max_v and max_w (at the stop margin with the "
+                                             "linear profile)"),
+    ParamSpec("monitor_slowdown_profile", "linear", "'linear': the slowdown's ratio rises "
+                                                    "from monitor_slowdown_ratio at the stop "
+                                                    "margin to 1 at the slowdown margin with "
+                                                    "the obstacle's least clearance; 'step': "
+                                                    "monitor_slowdown_ratio whenever within "
+                                                    "the margin (Nav2)"),
     ParamSpec("monitor_source_timeout", 0.5, "[s] scans older than this (after the first) stop "
                                              "the robot"),
     ParamSpec("monitor_yield", True, "when the monitor stops the robot where a moving obstacle "
@@ -223,6 +231,7 @@ class LocalRefinerParams:
     monitor_stop_margin: float
     monitor_slowdown_margin: float
     monitor_slowdown_ratio: float
+    monitor_slowdown_profile: str
     monitor_source_timeout: float
     monitor_yield: bool
     monitor_yield_horizon: float
@@ -248,6 +257,8 @@ class LocalRefinerParams:
         require(0 <= self.worker_nice <= 19, "worker_nice", self.worker_nice, "in 0..19")
         require(0 < self.monitor_slowdown_ratio <= 1, "monitor_slowdown_ratio",
                 self.monitor_slowdown_ratio, "in (0, 1]")
+        require(self.monitor_slowdown_profile in SLOWDOWN_PROFILES, "monitor_slowdown_profile",
+                self.monitor_slowdown_profile, f"one of {list(SLOWDOWN_PROFILES)}")
         require(0 <= self.monitor_stop_margin <= self.monitor_slowdown_margin,
                 "monitor_stop_margin", self.monitor_stop_margin,
                 ">= 0 and <= monitor_slowdown_margin")
@@ -274,6 +285,7 @@ class LocalRefinerParams:
             time_to_collision=self.monitor_time_to_collision,
             stop_margin=self.monitor_stop_margin, slowdown_margin=self.monitor_slowdown_margin,
             slowdown_ratio=self.monitor_slowdown_ratio,
+            slowdown_profile=self.monitor_slowdown_profile,
             source_timeout=self.monitor_source_timeout,
             # the controller ramps from the command sent: cap, do not scale again each tick
             slowdown_limits=(self.max_v, self.max_w),

@@ -2,7 +2,8 @@
 
 Common setup unless a test says otherwise: a 0.4 m x 0.4 m square robot (front edge at
 x = +0.2 m, sides at y = +-0.2 m) at the origin facing +x, default settings: horizon 1.0 s in
-0.1 s steps, stop within 0.02 m, slow down (x 0.3) within 0.3 m, points fresh.
+0.1 s steps, stop within 0.02 m, slow down within 0.3 m (x 0.3 with the "step" profile; x 0.3 at
+0.02 m rising to x 1 at 0.3 m with the default "linear" one), points fresh.
 """
 import math
 import time
@@ -43,15 +44,39 @@ def test_stops_before_a_box_half_a_metre_ahead():
 
 def test_slows_down_within_the_margin():
     # at 0.4 m/s the gap 0.5 - 0.4 t never falls under 0.02 m within 1 s (0.1 m at t = 1), but
-    # it is <= 0.3 m from t = 0.5 s on -> slowdown to 0.3 x (0.4, 0.2) = (0.12, 0.06)
-    result = run(box_face(0.7), 0.4, 0.2)
+    # it is <= 0.3 m from t = 0.5 s on -> slowdown to 0.3 x (0.4, 0.2) = (0.12, 0.06) (step)
+    result = run(box_face(0.7), 0.4, 0.2, slowdown_profile="step")
     assert result.action == "slowdown"
     assert (result.v, result.w) == pytest.approx((0.12, 0.06))
     assert result.min_time_to_collision == math.inf
 
 
+def test_linear_slowdown_grows_with_the_least_clearance():
+    # the same box, driving straight: the least gap over the horizon is 0.1 m (t = 1), 0.08 /
+    # 0.28 of the way from the stop margin to the slowdown margin -> ratio 0.3 + 0.7 * 0.08 /
+    # 0.28 = 0.5
+    result = run(box_face(0.7), 0.4)
+    assert result.action == "slowdown"
+    assert (result.v, result.w) == pytest.approx((0.2, 0.0))
+    # beside a wall: 0.25 m from the side -> 0.3 + 0.7 * 0.23 / 0.28 = 0.875; 0.05 m -> 0.375;
+    # the step profile gives 0.3 for both
+    for y, ratio in ((0.45, 0.875), (0.25, 0.375)):
+        assert run(wall_along_x(y), 0.4).v == pytest.approx(0.4 * ratio)
+        assert run(wall_along_x(y), 0.4, slowdown_profile="step").v == pytest.approx(0.12)
+    # a cap (slowdown_limits) follows the same ratio of the limits; the stop rule is unchanged
+    monitor = CollisionMonitor(SQUARE, CollisionMonitorConfig(slowdown_limits=(0.5, 1.5)))
+    assert monitor.filter(ORIGIN, 0.5, 0.0, wall_along_x(0.25), 0.0, 0.0).v == \
+        pytest.approx(0.5 * 0.375)
+    assert run(box_face(0.7), 0.5).action == "stop"
+    assert monitor.slowdown_ratio_at(0.0) == pytest.approx(0.3)
+    assert monitor.slowdown_ratio_at(1.0) == 1.0
+    with pytest.raises(EcahdError, match="slowdown_profile"):
+        CollisionMonitorConfig(slowdown_profile="smooth")
+
+
 def test_slowdown_with_limits_caps_the_command_and_a_ramp_keeps_its_speed():
-    cfg = CollisionMonitorConfig(slowdown_limits=(0.5, 1.5))  # cap 0.15 m/s, 0.45 rad/s
+    cfg = CollisionMonitorConfig(slowdown_limits=(0.5, 1.5), slowdown_profile="step")
+    # cap 0.15 m/s, 0.45 rad/s
     monitor = CollisionMonitor(SQUARE, cfg)
     result = monitor.filter(ORIGIN, 0.4, 0.2, box_face(0.7), 0.0, 0.0)
     assert result.action == "slowdown"
@@ -60,7 +85,8 @@ def test_slowdown_with_limits_caps_the_command_and_a_ramp_keeps_its_speed():
     # the command sent (+0.05 m/s per tick) settles at the cap; scaling by the ratio every
     # tick decays to 0.3 * 0.05 / 0.7 = 0.021 m/s
     for scaled in (False, True):
-        m = CollisionMonitor(SQUARE, CollisionMonitorConfig() if scaled else cfg)
+        m = CollisionMonitor(SQUARE, CollisionMonitorConfig(slowdown_profile="step")
+                             if scaled else cfg)
         v = 0.4
         for _ in range(50):
             v = m.filter(ORIGIN, min(0.5, v + 0.05), 0.0, wall_along_x(0.45), 0.0, 0.0).v
@@ -77,7 +103,7 @@ def test_driving_away_and_parallel_pass():
     # 0.3 m slowdown margin -> unchanged
     assert run(wall_along_x(0.6), 0.5).action == "none"
     # a wall 0.45 m from the centre line is 0.25 m from the side: slow down, never stop
-    result = run(wall_along_x(-0.45), 0.5)
+    result = run(wall_along_x(-0.45), 0.5, slowdown_profile="step")
     assert result.action == "slowdown" and result.v == pytest.approx(0.15)
 
 
