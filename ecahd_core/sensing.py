@@ -25,6 +25,7 @@ SCAN_MAX_BEAMS = 100_000  # a scan with more beams is rejected
 MOVER_MEMORY = 1.0  # [s] a return near one that moved this recently is not marked (LocalWorld)
 MOVER_GAP = 0.3  # [m] ... "near": the tracker's cluster gap
 SHUTTLE_MEMORY = 12.0  # [s] moving returns kept to find where a mover turns round
+SHUTTLE_ANGLE = 30.0  # [deg] a trail return moving at most this far off a line moved along it
 SHUTTLE_POINTS = 16  # at most this many moving returns of a scan are kept for that
 MEMORY_TILE = 128  # [cells] remembered obstacles are added to J's cost map tile by tile
 RECENT_OBSTACLES = 2.0  # [s] a detour that the whole memory blocks tries what was seen lately
@@ -242,26 +243,38 @@ class StaticClearance:
 
 
 def shuttle_bounds(points: np.ndarray, velocities: np.ndarray, trail: np.ndarray,
-                   trail_velocities: np.ndarray, *, lateral: float = MOVER_GAP) -> np.ndarray:
+                   trail_velocities: np.ndarray, trail_ages: np.ndarray, *,
+                   memory: float = SHUTTLE_MEMORY, lateral: float = MOVER_GAP) -> np.ndarray:
     """Where each moving point will turn round, from where movers were seen before: a cart or
     a person going back and forth (issue 11's moving obstacles), whose turn a constant-velocity
     prediction misses.
 
     For a point p moving with velocity v, the trail points within ``lateral`` [m] of the line
-    p + s v/|v| are the same mover's earlier returns along its way. If one of them moved the
-    other way (velocity against v), the mover has turned round before: it shuttles over the
+    p + s v/|v| that moved along it (within ``SHUTTLE_ANGLE``) are the same mover's earlier
+    returns along its way. If one of them moved the other way, the mover has turned round
+    behind it: it shuttles over the
     stretch those trail points cover, [min s, max s], and p is predicted to turn round at its
     ends. Without such evidence the point keeps its straight-line prediction.
+
+    The end ahead (max s) is trusted only when it is known: the trail holds the mover's turn
+    there (a return ahead of p going p's way older than one ahead of p going back), or the trail reaches back to
+    where the mover was first seen (its oldest return on the line is younger than ``memory``
+    less 1 s, so the trail was not cut off). A trail cut off by ``memory`` covers only part of
+    a long stretch, and its far end is where the memory began, not where the mover turns: a
+    mover predicted to turn round "now" there drove into a robot standing 1 m further on its
+    way (depot, docs/RESULTS.md). The end behind (min s), where it turned last, is known.
 
     Args:
         points, velocities: (M, 2) [m], [m/s] this scan's unmapped returns (velocity 0:
             static or unknown; those get no bounds).
         trail, trail_velocities: (K, 2) [m], [m/s] earlier moving returns (all moving).
+        trail_ages: (K,) [s] how long before this scan each trail point was seen.
+        memory: [s] how long trail points are kept (older ones were dropped).
         lateral: [m] how far off the line of motion a trail point may lie.
 
     Returns:
         (M, 2) [m] (behind <= 0, ahead >= 0) offsets along each point's direction of motion;
-        (-inf, inf) where no turn is known.
+        -inf behind / inf ahead where no turn is known.
     """
     out = np.tile([-np.inf, np.inf], (len(points), 1))
     speed = np.hypot(velocities[:, 0], velocities[:, 1])  # (M,)
@@ -277,15 +290,28 @@ def shuttle_bounds(points: np.ndarray, velocities: np.ndarray, trail: np.ndarray
     along = u @ trail_velocities.T  # (m, K) [m/s] trail speed along u
     trail_speed = np.hypot(trail_velocities[:, 0], trail_velocities[:, 1])  # (K,)
     on = off <= lateral  # (m, K)
-    back = on & (along < -0.5 * trail_speed[None, :])  # moved the other way on this line
+    # moved the other way along this line, within SHUTTLE_ANGLE of it: a second mover crossing
+    # the line at 46 degrees counted as this one going back and forth (depot, RESULTS.md)
+    parallel = np.abs(along) >= math.cos(math.radians(SHUTTLE_ANGLE)) * trail_speed[None, :]
+    back = on & parallel & (along < 0)
     turned = back.any(axis=1)  # (m,)
     if not turned.any():
         return out
+    ages = np.broadcast_to(np.asarray(trail_ages, dtype=np.float64)[None, :], on.shape)
+    # a turn ahead is in the trail: the mover went this way ahead of p (older) before it came
+    # back there (younger). Both ahead of p: a turn seen behind p, or a second mover's
+    # returns, are not evidence of where the mover turns ahead
+    ahead = s > 0.0
+    same = on & parallel & (along > 0) & ahead  # went this way, ahead of p
+    turn_ahead = np.where(same, ages, -np.inf).max(axis=1) > \
+        np.where(back & ahead, ages, np.inf).min(axis=1)  # (m,)
+    uncut = np.where(on, ages, -np.inf).max(axis=1) < memory - 1.0  # (m,)
     lo = np.where(on, s, np.inf).min(axis=1)  # (m,)
     hi = np.where(on, s, -np.inf).max(axis=1)
     rows = moving[turned]
     out[rows, 0] = np.minimum(lo[turned], 0.0)
-    out[rows, 1] = np.maximum(hi[turned], 0.0)
+    known = turned & (turn_ahead | uncut)
+    out[moving[known], 1] = np.maximum(hi[known], 0.0)
     return out
 
 
@@ -399,7 +425,9 @@ class LocalWorld:
         if moving.any() and self._trail:
             bounds = shuttle_bounds(points, velocities,
                                     np.concatenate([p for _, p, _ in self._trail]),
-                                    np.concatenate([v for _, _, v in self._trail]))
+                                    np.concatenate([v for _, _, v in self._trail]),
+                                    np.concatenate([np.full(len(p), stamp - t)
+                                                    for t, p, _ in self._trail]))
         if moving.any():
             keep = np.flatnonzero(moving)
             keep = keep[np.linspace(0, len(keep) - 1, min(len(keep), SHUTTLE_POINTS)

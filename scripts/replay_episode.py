@@ -71,18 +71,18 @@ def tracker(run: Path, episode: int, lo: float, hi: float, map_name: str) -> Non
     from ecahd_core.cost import CollisionCost
     from ecahd_core.footprint import make_footprint
     from ecahd_core.maps import load_map
-    from ecahd_core.sensing import LocalWorld, Scan
+    from ecahd_core.sensing import SHUTTLE_MEMORY, LocalWorld, Scan
 
     bag = read_bag(run / "bag", ["/scan", "/odom", "/goal_pose"])
     t0 = [t * 1e-9 for t, _ in bag["/goal_pose"]][episode]
     movers = [o for o in load_scenario(run / "scenarios" / f"episode_{episode}.yaml")
               if o.moving]
     grid = load_map(map_name)
-    world = LocalWorld(grid, CollisionCost.build(grid, make_footprint("circle")))
+    world = LocalWorld(grid, CollisionCost.build(grid, make_footprint("circle")), shuttles=True)
     odom = [(m.header.stamp.sec + m.header.stamp.nanosec * 1e-9, m) for _, m in bag["/odom"]]
     for _, m in bag["/scan"]:
         stamp = m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
-        if not lo - 1.0 <= stamp <= hi:
+        if not lo - 2 * SHUTTLE_MEMORY <= stamp <= hi:  # the shuttle memory filled, as live
             continue
         p = _nearest(odom, stamp)[1].pose.pose
         pose = (p.position.x, p.position.y, _yaw(p.orientation))
@@ -98,9 +98,20 @@ def tracker(run: Path, episode: int, lo: float, hi: float, map_name: str) -> Non
             true = (np.array(o.position(stamp - t0 + 0.05))
                     - np.array(o.position(stamp - t0 - 0.05))) / 0.1
             est = seen.velocities[near].mean(axis=0) if near.any() else None
+            turn = ""
+            if near.any() and seen.bounds is not None:
+                ahead = seen.bounds[near, 1]
+                ahead = ahead[np.isfinite(ahead)]
+                speed = float(np.hypot(*true))
+                if len(ahead) and speed > 0:  # true: the centre's way to the end it heads for
+                    end = max(o.path, key=lambda q: np.dot(np.asarray(q) - c, true))
+                    left = float(np.dot(np.asarray(end) - c, true / speed))
+                    turn = f", turns in {np.median(ahead):.2f} m predicted / {left:.2f} m true"
+                elif not len(ahead):
+                    turn = ", no turn known ahead"
             out.append(f"true ({true[0]:+.2f}, {true[1]:+.2f}) estimated "
                        + ("-" if est is None else f"({est[0]:+.2f}, {est[1]:+.2f})")
-                       + f" from {int(near.sum())} returns")
+                       + f" from {int(near.sum())} returns{turn}")
         print(f"{stamp:7.2f} robot ({pose[0]:.2f}, {pose[1]:.2f}) | " + " | ".join(out))
 
 

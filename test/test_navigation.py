@@ -459,6 +459,53 @@ def test_a_cylinder_crossing_the_corridor_is_not_a_wall_in_the_local_costmap(mar
         assert cyl_cells[0] > 0 and max(cyl_cells[21:]) == 0, cyl_cells
 
 
+def _shuttle_trail(length: float, speed: float, now: float, memory: float, dt: float = 0.1):
+    """A mover going back and forth on y = 0 between x = 0 and x = length from x = 0 at t = 0:
+    its trail (points, velocities, ages) of the last ``memory`` s before ``now`` and its
+    point and velocity at ``now``."""
+    def at(t):
+        s = (speed * t) % (2 * length)
+        going = s <= length
+        return (s if going else 2 * length - s), (speed if going else -speed)
+
+    times = np.arange(max(0.0, now - memory + dt), now - 1e-9, dt)
+    xs, vs = zip(*(at(t) for t in times))
+    trail = np.stack([np.array(xs), np.zeros(len(xs))], axis=1)
+    vel = np.stack([np.array(vs), np.zeros(len(vs))], axis=1)
+    x, v = at(now)
+    return trail, vel, now - times, np.array([[x, 0.0]]), np.array([[v, 0.0]])
+
+
+def test_shuttle_bounds_trust_the_end_ahead_only_when_it_is_known():
+    from ecahd_core.sensing import shuttle_bounds
+
+    # a 6 m stretch at 0.3 m/s (20 s a leg) with a 12 s memory, at t = 45 s: going +x at
+    # x = 1.5 since its turn at x = 0 (t = 40); the trail still holds the way back from x = 2.1.
+    # Where it turned last (1.5 m behind) is known; the end ahead (x = 6, 4.5 m on) is not in
+    # the trail: no turn is predicted ahead (the trail's far end, 0.6 m on, is not one)
+    trail, vel, ages, p, v = _shuttle_trail(6.0, 0.3, 45.0, 12.0)
+    bounds = shuttle_bounds(p, v, trail, vel, ages, memory=12.0)
+    assert bounds[0, 0] == pytest.approx(-1.5, abs=0.05) and bounds[0, 1] == np.inf
+    # nor are returns going back behind p, 2 s ago (a second mover's, its velocity misjudged
+    # where it crosses this one's line): a turn behind p says nothing of the end ahead
+    other = np.array([[0.6, 0.05], [0.7, -0.05]])
+    bounds = shuttle_bounds(p, v, np.concatenate([trail, other]),
+                            np.concatenate([vel, [[-0.2, 0.0], [-0.2, 0.0]]]),
+                            np.concatenate([ages, [2.0, 2.0]]), memory=12.0)
+    assert bounds[0, 1] == np.inf
+    # on a 1.5 m stretch (5 s a leg) the trail holds both turns: the stretch is known
+    trail, vel, ages, p, v = _shuttle_trail(1.5, 0.3, 31.0, 12.0)  # x = 0.3, going +x
+    bounds = shuttle_bounds(p, v, trail, vel, ages, memory=12.0)
+    np.testing.assert_allclose(bounds[0], [-0.3, 1.2], atol=0.05)
+    # a trail not cut off by the memory starts where the mover was first seen: trusted
+    trail, vel, ages, p, v = _shuttle_trail(6.0, 0.3, 25.0, 30.0)  # x = 4.5, going -x
+    np.testing.assert_allclose(shuttle_bounds(p, v, trail, vel, ages, memory=30.0)[0],
+                               [-1.5, 4.5], atol=0.05)
+    # never seen going the other way: nothing known
+    trail, vel, ages, p, v = _shuttle_trail(6.0, 0.3, 10.0, 12.0)
+    assert np.all(np.isinf(shuttle_bounds(p, v, trail, vel, ages, memory=12.0)))
+
+
 @pytest.fixture(scope="module")
 def small_office():
     from ecahd_core.mapgen import MapGenConfig, generate
