@@ -30,6 +30,7 @@ MOVER_GAP = 0.3  # [m] ... "near": the tracker's cluster gap
 SHUTTLE_MEMORY = 30.0
 SHUTTLE_ANGLE = 30.0  # [deg] a trail return moving at most this far off a line moved along it
 SHUTTLE_POINTS = 8  # at most this many moving returns of a scan are kept for that
+SHUTTLE_CUT_SLACK = 1.0  # [s] a trail whose oldest return is this near the memory was cut off
 MEMORY_TILE = 128  # [cells] remembered obstacles are added to J's cost map tile by tile
 RECENT_OBSTACLES = 2.0  # [s] a detour that the whole memory blocks tries what was seen lately
 
@@ -255,17 +256,18 @@ def shuttle_bounds(points: np.ndarray, velocities: np.ndarray, trail: np.ndarray
     For a point p moving with velocity v, the trail points within ``lateral`` [m] of the line
     p + s v/|v| that moved along it (within ``SHUTTLE_ANGLE``) are the same mover's earlier
     returns along its way. If one of them moved the other way, the mover has turned round
-    behind it: it shuttles over the
-    stretch those trail points cover, [min s, max s], and p is predicted to turn round at its
-    ends. Without such evidence the point keeps its straight-line prediction.
+    behind it: it shuttles over the stretch those trail points cover, [min s, max s], and p is
+    predicted to turn round at its ends. Without such evidence the point keeps its
+    straight-line prediction.
 
     The end ahead (max s) is trusted only when it is known: the trail holds the mover's turn
-    there (a return ahead of p going p's way older than one ahead of p going back), or the trail reaches back to
-    where the mover was first seen (its oldest return on the line is younger than ``memory``
-    less 1 s, so the trail was not cut off). A trail cut off by ``memory`` covers only part of
-    a long stretch, and its far end is where the memory began, not where the mover turns: a
-    mover predicted to turn round "now" there drove into a robot standing 1 m further on its
-    way (depot, docs/RESULTS.md). The end behind (min s), where it turned last, is known.
+    there (a return ahead of p going p's way older than one ahead of p going back), or the
+    trail reaches back to where the mover was first seen (its oldest return on the line is
+    younger than ``memory`` less ``SHUTTLE_CUT_SLACK``, so the trail was not cut off). A
+    trail cut off by ``memory`` covers only part of a long stretch, and its far end is where
+    the memory began, not where the mover turns: a mover predicted to turn round "now" there
+    drove into a robot standing 1 m further on its way (depot, docs/RESULTS.md). The end
+    behind (min s), where it turned last, is known.
 
     Args:
         points, velocities: (M, 2) [m], [m/s] this scan's unmapped returns (velocity 0:
@@ -308,7 +310,7 @@ def shuttle_bounds(points: np.ndarray, velocities: np.ndarray, trail: np.ndarray
     same = on & parallel & (along > 0) & ahead  # went this way, ahead of p
     turn_ahead = np.where(same, ages, -np.inf).max(axis=1) > \
         np.where(back & ahead, ages, np.inf).min(axis=1)  # (m,)
-    uncut = np.where(on, ages, -np.inf).max(axis=1) < memory - 1.0  # (m,)
+    uncut = np.where(on, ages, -np.inf).max(axis=1) < memory - SHUTTLE_CUT_SLACK  # (m,)
     lo = np.where(on, s, np.inf).min(axis=1)  # (m,)
     hi = np.where(on, s, -np.inf).max(axis=1)
     rows = moving[turned]
