@@ -26,7 +26,7 @@ MOVER_MEMORY = 1.0  # [s] a return near one that moved this recently is not mark
 MOVER_GAP = 0.3  # [m] ... "near": the tracker's cluster gap
 # [s] moving returns kept to find where a mover turns round: a whole back-and-forth of a 3 m
 # run at 0.3 m/s (20 s). 12 s forgot a depot mover's turn just before it came back into the
-# robot; 30 s x 8 returns a scan costs 3.6 ms a scan (12 s x 16: 2.8 ms)
+# robot; 30 s x 8 returns a scan: shuttle_bounds 3.6 ms a scan (12 s x 16: 3.0; RESULTS.md)
 SHUTTLE_MEMORY = 30.0
 SHUTTLE_ANGLE = 30.0  # [deg] a trail return moving at most this far off a line moved along it
 SHUTTLE_POINTS = 8  # at most this many moving returns of a scan are kept for that
