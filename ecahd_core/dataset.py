@@ -125,6 +125,55 @@ def split_by_arclength(path, k: int) -> list[np.ndarray]:
     return pieces
 
 
+def corner_waypoints(path, n: int, *, tolerance: float = 1e-3) -> np.ndarray:
+    """``n`` waypoints of a polyline that keep its corners (the "corners" waypoint rule, ours).
+
+    The polyline's vertices where it turns (an interior vertex farther than ``tolerance`` [m]
+    from the chord of its two neighbours) are kept; the remaining n - (corners + 2) points
+    split the legs, each extra point going to the leg whose pieces are longest, evenly along
+    it. So consecutive waypoints are joined by the path's own straight legs: where the path is
+    collision-free, so is every straight leg between two waypoints (with evenly spaced
+    waypoints a leg cuts each corner of the path it spans). A path with more corners than
+    n - 2 loses those that deviate least from their neighbours' chord first.
+
+    path: (N, 2) [m] -> (n, 2) float64 [m], n >= 2; first and last points are the path's.
+    """
+    if int(n) != n or n < 2:
+        raise TrajectoryError(f"corner waypoints need n >= 2 points, got {n!r}")
+    pts = _as_path(path)
+    keep = np.concatenate([[True], np.linalg.norm(np.diff(pts, axis=0), axis=1) > 1e-9])
+    v = pts[keep]
+    if len(v) == 1:
+        return np.repeat(v, int(n), axis=0)
+    v = v[np.concatenate([[True], _chord_deviation(v) > tolerance, [True]])]
+    while len(v) > n:  # more corners than waypoints: drop the flattest
+        v = np.delete(v, 1 + int(np.argmin(_chord_deviation(v))), axis=0)
+    legs = np.linalg.norm(np.diff(v, axis=0), axis=1)  # (L,)
+    pieces = np.ones(len(legs), dtype=np.int64)
+    for _ in range(int(n) - len(v)):
+        pieces[np.argmax(legs / pieces)] += 1
+    out = [v[:1]]
+    for j, m in enumerate(pieces):
+        f = np.arange(1, m + 1, dtype=np.float64)[:, None] / m
+        out.append(v[j] + f * (v[j + 1] - v[j]))
+    out = np.concatenate(out)
+    out[0], out[-1] = pts[0], pts[-1]
+    return out
+
+
+def _chord_deviation(v: np.ndarray) -> np.ndarray:
+    """(N, 2) vertices -> (N - 2,) distance [m] of each interior vertex from the segment joining
+    its two neighbours."""
+    a, b, c = v[:-2], v[1:-1], v[2:]
+    ac = c - a
+    t = np.clip(np.einsum("ij,ij->i", b - a, ac) / np.maximum(np.einsum("ij,ij->i", ac, ac),
+                                                               1e-18), 0.0, 1.0)
+    return np.linalg.norm(a + t[:, None] * ac - b, axis=1)
+
+
+WAYPOINT_RULES = ("arclength", "corners")
+
+
 def chunk_count(length: float, sparse_horizon: int, max_spacing: float | None) -> int:
     """How many equal pieces a path of ``length`` [m] is cut into so that its P^g sparse
     waypoints lie at most ``max_spacing`` [m] apart along it (1 if ``max_spacing`` is None)."""
@@ -163,24 +212,36 @@ class ExpertSample:
 
 
 def expert_sample(path, *, sparse_horizon: int = 10, dense_points: int = 4,
-                  full_points: int = 100) -> ExpertSample:
-    """Resample one (N, 2) expert path [m] into its sparse, shorter-horizon, dense and full views."""
+                  full_points: int = 100, waypoints: str = "arclength") -> ExpertSample:
+    """Resample one (N, 2) expert path [m] into its sparse, shorter-horizon, dense and full views.
+
+    ``waypoints`` is the rule of the sparse views: "arclength" (the paper's: evenly spaced by
+    arc length) or "corners" (:func:`corner_waypoints`, ours; ``sparse_h[h]`` is then
+    ``sparse[P^g - h:]``). The dense view is the arc-length one under both rules: DD learns the
+    paper's local segments."""
+    if waypoints not in WAYPOINT_RULES:
+        raise DatasetError(f"waypoints must be one of {list(WAYPOINT_RULES)}, got {waypoints!r}")
     pts = _as_path(path)
     Pg, Pl = sparse_horizon, dense_points
     total = float(cumulative_arclength(pts)[-1])
     s = np.linspace(0.0, total, Pg)  # arc length of the sparse waypoints [m]
-    sparse = resample_by_arclength(pts, Pg)  # (Pg, 2)
+    even = resample_by_arclength(pts, Pg)  # (Pg, 2)
 
     sparse_h = {}
-    for h in range(2, Pg + 1):
-        k = Pg - h  # waypoints already reached
-        rest = points_at_arclength(pts, np.linspace(s[k], total, h))  # (h, 2)
-        rest[0], rest[-1] = sparse[k], sparse[-1]
-        sparse_h[h] = rest
+    if waypoints == "corners":
+        sparse = corner_waypoints(pts, Pg)
+        sparse_h = {h: sparse[Pg - h:].copy() for h in range(2, Pg + 1)}
+    else:
+        sparse = even
+        for h in range(2, Pg + 1):
+            k = Pg - h  # waypoints already reached
+            rest = points_at_arclength(pts, np.linspace(s[k], total, h))  # (h, 2)
+            rest[0], rest[-1] = sparse[k], sparse[-1]
+            sparse_h[h] = rest
 
     dense = np.stack([points_at_arclength(pts, np.linspace(s[k], s[k + 1], Pl))
                       for k in range(Pg - 1)])  # (Pg - 1, Pl, 2)
-    dense[:, 0], dense[:, -1] = sparse[:-1], sparse[1:]
+    dense[:, 0], dense[:, -1] = even[:-1], even[1:]
 
     full = resample_by_arclength(pts, full_points)  # (F, 2)
     return ExpertSample(sparse=sparse, sparse_h=sparse_h, dense=dense, full=full, length=total)
@@ -397,7 +458,8 @@ def generate_dataset(grid: GridMap, *, pairs: int, seed: int, footprint_spec: st
                      max_attempts: int | None = None, expert: str = "auto",
                      workers: int | None = None,
                      coarse_block_size: float = COARSE_BLOCK_SIZE,
-                     max_spacing: float | None = None) -> ExpertDataset:
+                     max_spacing: float | None = None,
+                     waypoints: str = "auto") -> ExpertDataset:
     """Plan ``pairs`` expert paths between seeded random start/goal pairs (paper Sec. IV-A).
 
     Starts and goals are drawn uniformly from the clearance-free space (clearance = the
@@ -417,6 +479,10 @@ def generate_dataset(grid: GridMap, *, pairs: int, seed: int, footprint_spec: st
     sample, its ends the sample's start and goal (so one attempt may give several samples; the
     last attempt's extra pieces are dropped). It keeps the waypoint spacing of a large map's
     data within what SD learnt on maze2d-large (0.4-1.9 m) at the price of shorter plans.
+
+    ``waypoints`` is the sparse views' rule (:func:`expert_sample`): "arclength" (the paper's),
+    "corners" (:func:`corner_waypoints`) or "auto" (corners on maps of more than
+    ``EXACT_MAX_CELLS`` cells, arclength on smaller ones such as maze2d-large).
 
     Raises:
         DatasetError: bad parameters, no clearance-free space, or fewer than ``pairs`` kept
@@ -440,6 +506,11 @@ def generate_dataset(grid: GridMap, *, pairs: int, seed: int, footprint_spec: st
                                         and math.isfinite(max_spacing) and max_spacing > 0):
         raise DatasetError(f"max_spacing must be None or a finite number > 0 m, "
                            f"got {max_spacing!r}")
+    if waypoints == "auto":
+        waypoints = waypoint_rule_for(grid)
+    if waypoints not in WAYPOINT_RULES:
+        raise DatasetError(f"waypoints must be 'auto' or one of {list(WAYPOINT_RULES)}, "
+                           f"got {waypoints!r}")
     if max_attempts is None:
         max_attempts = 20 * pairs + 100
     if expert == "auto":
@@ -453,7 +524,7 @@ def generate_dataset(grid: GridMap, *, pairs: int, seed: int, footprint_spec: st
         raise DatasetError(f"no cell of map {grid.name!r} is {clearance:.3f} m away from the "
                            f"obstacles, the clearance robot {footprint.name!r} needs")
     views = dict(sparse_horizon=sparse_horizon, dense_points=dense_points, full_points=full_points,
-                 max_spacing=max_spacing)
+                 max_spacing=max_spacing, waypoints=waypoints)
     run = _ExpertRun(pairs=pairs, max_attempts=max_attempts, min_distance=min_distance,
                      grid=grid, progress=progress)
     extra = {}
@@ -489,6 +560,7 @@ def generate_dataset(grid: GridMap, *, pairs: int, seed: int, footprint_spec: st
         "sparse_horizon": int(sparse_horizon),
         "dense_points": int(dense_points),
         "full_points": int(full_points),
+        **({"waypoints": waypoints} if waypoints != "arclength" else {}),
         "attempts": run.attempts,
         "rejected_short": run.rejected_short,
         "rejected_unreachable": run.rejected_unreachable,
@@ -661,6 +733,17 @@ def sample_endpoint(rng: np.random.Generator, planner: AStarPlanner) -> np.ndarr
         if planner.point_clearance(point) >= planner.clearance - SDF_TOLERANCE:
             return point
     return sample_free_point(rng, planner.mask, planner.grid, jitter=False)  # centres always are
+
+
+def waypoint_rule_for(grid: GridMap) -> str:
+    """The "auto" waypoint rule: "corners" on maps of more than ``EXACT_MAX_CELLS`` cells (the
+    building maps), "arclength" (the paper's) on smaller ones."""
+    return "corners" if grid.height * grid.width > EXACT_MAX_CELLS else "arclength"
+
+
+def waypoint_rule(dataset: "ExpertDataset") -> str:
+    """The sparse views' rule a dataset was written with ("arclength" when not recorded)."""
+    return str(dataset.params.get("waypoints", "arclength"))
 
 
 def _check_positive_int(name: str, value, minimum: int) -> None:

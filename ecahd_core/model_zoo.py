@@ -121,14 +121,18 @@ def training_arrays(kind: str, dataset) -> dict[int, np.ndarray]:
     SD learns every horizon 2..P^g that Algorithm 1's shrinking horizon asks for, from two views
     of each expert path: the remaining path after the robot advanced (``sparse_h``, evenly spaced
     suffixes) and the whole path resampled to h points (other spacings, same start-goal
-    distribution). DD learns the P^l-point local segments, FD the 100-point sequences.
+    distribution; with the "corners" waypoint rule the whole path's h corner waypoints of its
+    100-point view, :func:`~ecahd_core.dataset.corner_waypoints`). DD learns the P^l-point local segments, FD the 100-point sequences.
     """
     from ecahd_core.dataset import resample_by_arclength
 
     if kind == "sd":
+        from ecahd_core.dataset import corner_waypoints, waypoint_rule
+
+        pick = corner_waypoints if waypoint_rule(dataset) == "corners" else resample_by_arclength
         arrays = {}
         for h, suffix in sorted(dataset.sparse_h.items()):
-            whole = np.stack([resample_by_arclength(p, h) for p in dataset.full]).astype(np.float32)
+            whole = np.stack([pick(p, h) for p in dataset.full]).astype(np.float32)
             arrays[int(h)] = np.concatenate([suffix, whole]).astype(np.float32)
         return arrays
     if kind == "dd":

@@ -8,7 +8,7 @@ import pytest
 from ecahd_core.astar import AStarPlanner
 from ecahd_core.commands import dataset as dataset_command
 from ecahd_core.dataset import (DATASET_VERSION, EXACT_MAX_CELLS, ExpertDataset, chunk_count,
-                                expert_sample, file_sha256, generate_dataset, points_at_arclength,
+                                corner_waypoints, expert_sample, file_sha256, generate_dataset, points_at_arclength,
                                 resample_by_arclength, split_by_arclength)
 from ecahd_core.errors import DatasetError, TrajectoryError
 from ecahd_core.mapgen import MapGenConfig, generate_map
@@ -68,6 +68,34 @@ def test_expert_sample_views():
     np.testing.assert_allclose(s.sparse_h[3][:, 0], [7.0, 8.0, 9.0], atol=1e-12)
     np.testing.assert_allclose(s.dense[4, :, 0], [4.0, 4 + 1 / 3, 4 + 2 / 3, 5.0], atol=1e-12)
     assert s.full.shape == (100, 2) and s.length == pytest.approx(9.0)
+
+
+def test_corner_waypoints_keep_corners_and_split_the_longest_legs():
+    # an L: 6 m east, 2 m north; the corner stays, 3 extra points go to the long leg
+    path = np.array([[0.0, 0.0], [3.0, 0.0], [6.0, 0.0], [6.0, 2.0]])  # (3, 0) is collinear
+    w = corner_waypoints(path, 6)
+    np.testing.assert_allclose(w, [[0, 0], [1.5, 0], [3, 0], [4.5, 0], [6, 0], [6, 2]],
+                               atol=1e-12)
+    # every straight leg between two waypoints lies on the path
+    assert np.all((w[:, 1] == 0) | (w[:, 0] == 6))
+    # more corners than waypoints: the flattest corner goes first
+    zig = np.array([[0.0, 0.0], [1.0, 0.05], [2.0, 0.0], [3.0, 2.0], [4.0, 0.0]])
+    np.testing.assert_allclose(corner_waypoints(zig, 4), [[0, 0], [2, 0], [3, 2], [4, 0]])
+    np.testing.assert_allclose(corner_waypoints(np.array([[1.0, 1.0]]), 3), np.ones((3, 2)))
+    with pytest.raises(TrajectoryError, match="n >= 2"):
+        corner_waypoints(path, 1)
+
+
+def test_expert_sample_corners_rule():
+    path = np.array([[0.0, 0.0], [6.0, 0.0], [6.0, 3.0]])
+    s = expert_sample(path, sparse_horizon=4, dense_points=4, full_points=50, waypoints="corners")
+    np.testing.assert_allclose(s.sparse, [[0, 0], [3, 0], [6, 0], [6, 3]], atol=1e-12)
+    np.testing.assert_allclose(s.sparse_h[2], [[6, 0], [6, 3]], atol=1e-12)
+    # the dense view stays the arc-length one (DD learns the paper's segments)
+    even = expert_sample(path, sparse_horizon=4, dense_points=4, full_points=50)
+    np.testing.assert_allclose(s.dense, even.dense)
+    with pytest.raises(DatasetError, match="waypoints"):
+        expert_sample(path, waypoints="evenly")
 
 
 # ----------------------------------------------------------------------------- generation
@@ -184,6 +212,26 @@ def test_large_maps_get_the_coarse_expert(office, office_ds):
     # all pairs in one region of the clearance-free space
     rows, cols = office.world_to_cell(office_ds.starts.astype(np.float64))
     assert len(np.unique(planner.components[rows, cols])) == 1
+
+
+def test_large_maps_get_corner_waypoints_whose_legs_follow_the_expert(office, office_ds, ds):
+    from ecahd_core.collision import check_collision
+    from ecahd_core.footprint import circle_footprint
+
+    assert office_ds.params["waypoints"] == "corners" and "waypoints" not in ds.params
+    # the expert keeps the clearance, and every straight leg between two corner waypoints lies
+    # on its path: a point (a 1 mm circle) crosses no wall along the sparse plans
+    point = circle_footprint(1e-3)
+    for sparse in office_ds.sparse.astype(np.float64):
+        assert check_collision(sparse, point, office).collision_free
+    for h in range(2, office_ds.sparse_horizon + 1):
+        np.testing.assert_array_equal(office_ds.sparse_h[h], office_ds.sparse[:, -h:])
+    arclength = generate_dataset(office, pairs=8, seed=2, workers=1, progress=False,
+                                 waypoints="arclength")
+    assert "waypoints" not in arclength.params
+    np.testing.assert_array_equal(arclength.dense, office_ds.dense)  # DD's data: the same
+    with pytest.raises(DatasetError, match="waypoints"):
+        generate_dataset(office, pairs=1, seed=0, waypoints="even", progress=False)
 
 
 def test_coarse_expert_data_do_not_depend_on_the_worker_count(office, office_ds, tmp_path):

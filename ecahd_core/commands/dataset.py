@@ -35,6 +35,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-spacing", type=float, default=None,
                    help="[m] cut longer paths into pieces so that the sparse waypoints lie at "
                         "most this far apart (maze2d-large's data: 0.4-1.9 m); default: off")
+    p.add_argument("--waypoints", choices=("auto", "arclength", "corners"), default="auto",
+                   help="rule of SD's sparse waypoints: arclength (the paper's, evenly spaced), "
+                        "corners (the path's corners kept, the rest evenly on its legs), auto "
+                        "(corners on maps over 50 000 cells)")
     p.add_argument("--out", required=True, help="dataset file to write (.npz)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -53,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
         min_distance=args.min_distance, sparse_horizon=args.sparse_horizon,
         dense_points=args.dense_points, full_points=args.full_points,
         progress=not args.no_progress, expert=args.expert, workers=args.workers,
-        max_spacing=args.max_spacing)
+        max_spacing=args.max_spacing, waypoints=args.waypoints)
     elapsed = time.perf_counter() - t0
     out = dataset.save(args.out)
 

@@ -53,6 +53,9 @@ def add_all_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--robot", default="circle",
                    help="footprint whose clearance the expert A* paths keep")
     p.add_argument("--pairs", type=int, default=5000, help="expert start/goal pairs")
+    p.add_argument("--waypoints", choices=("auto", "arclength", "corners"), default="auto",
+                   help="rule of SD's sparse waypoints in the expert data (see `ecahd dataset "
+                        "--help`; auto: corners on maps over 50 000 cells)")
     p.add_argument("--kinds", nargs="+", default=["sd", "dd"], choices=("sd", "dd", "fd"),
                    help="models to train: ECAHD needs SD and DD; add fd for the Full "
                         "Diffusion baseline of the benchmarks (about 8-10 more minutes)")
@@ -193,6 +196,7 @@ def run_all(args: argparse.Namespace) -> int:
             f"in {time.perf_counter() - t_start:.0f} s; {precision})", flush=True)
     data_path = work / f"{grid.name}_{args.robot}_{args.pairs}_s{args.seed}.npz"
     dataset = generate_dataset(grid, pairs=args.pairs, seed=args.seed, footprint_spec=args.robot,
+                               waypoints=args.waypoints,
                                progress=not args.no_progress)
     dataset.save(data_path)
     times = {"dataset": time.perf_counter() - t_start}
