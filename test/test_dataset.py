@@ -7,9 +7,10 @@ import pytest
 
 from ecahd_core.astar import AStarPlanner
 from ecahd_core.commands import dataset as dataset_command
-from ecahd_core.dataset import (DATASET_VERSION, EXACT_MAX_CELLS, ExpertDataset, chunk_count,
-                                corner_waypoints, expert_sample, file_sha256, generate_dataset, points_at_arclength,
-                                resample_by_arclength, split_by_arclength)
+from ecahd_core.dataset import (CORNERS_ABOVE_SPACING, DATASET_VERSION, EXACT_MAX_CELLS,
+                                ExpertDataset, chunk_count, corner_waypoints, expert_sample,
+                                file_sha256, generate_dataset, points_at_arclength,
+                                resample_by_arclength, split_by_arclength, waypoint_rule_for)
 from ecahd_core.errors import DatasetError, TrajectoryError
 from ecahd_core.mapgen import MapGenConfig, generate_map
 from ecahd_core.maps import builtin_map
@@ -214,24 +215,34 @@ def test_large_maps_get_the_coarse_expert(office, office_ds):
     assert len(np.unique(planner.components[rows, cols])) == 1
 
 
-def test_large_maps_get_corner_waypoints_whose_legs_follow_the_expert(office, office_ds, ds):
+def test_corner_waypoints_legs_follow_the_expert(office, office_ds, ds):
     from ecahd_core.collision import check_collision
     from ecahd_core.footprint import circle_footprint
 
-    assert office_ds.params["waypoints"] == "corners" and "waypoints" not in ds.params
+    corners = generate_dataset(office, pairs=8, seed=2, workers=1, progress=False,
+                               waypoints="corners")
+    assert corners.params["waypoints"] == "corners"
     # the expert keeps the clearance, and every straight leg between two corner waypoints lies
     # on its path: a point (a 1 mm circle) crosses no wall along the sparse plans
     point = circle_footprint(1e-3)
-    for sparse in office_ds.sparse.astype(np.float64):
+    for sparse in corners.sparse.astype(np.float64):
         assert check_collision(sparse, point, office).collision_free
-    for h in range(2, office_ds.sparse_horizon + 1):
-        np.testing.assert_array_equal(office_ds.sparse_h[h], office_ds.sparse[:, -h:])
-    arclength = generate_dataset(office, pairs=8, seed=2, workers=1, progress=False,
-                                 waypoints="arclength")
-    assert "waypoints" not in arclength.params
-    np.testing.assert_array_equal(arclength.dense, office_ds.dense)  # DD's data: the same
+    for h in range(2, corners.sparse_horizon + 1):
+        np.testing.assert_array_equal(corners.sparse_h[h], corners.sparse[:, -h:])
+    # "auto" on these short paths and on maze2d-large: the paper's rule, files as before
+    spacing = np.median(office_ds.lengths) / (office_ds.sparse_horizon - 1)
+    assert spacing <= CORNERS_ABOVE_SPACING
+    assert "waypoints" not in office_ds.params and "waypoints" not in ds.params
+    np.testing.assert_array_equal(corners.dense, office_ds.dense)  # DD's data: the same
+    np.testing.assert_array_equal(corners.starts, office_ds.starts)
     with pytest.raises(DatasetError, match="waypoints"):
         generate_dataset(office, pairs=1, seed=0, waypoints="even", progress=False)
+
+
+def test_auto_waypoint_rule_follows_the_median_spacing():
+    assert waypoint_rule_for([9.0, 13.0, 20.0], 10) == "arclength"  # 13 / 9 = 1.44 m
+    assert waypoint_rule_for([9.0, 14.0, 20.0], 10) == "corners"  # 14 / 9 = 1.56 m
+    assert waypoint_rule_for([3.0, 4.0], 3) == "corners"  # 3.5 / 2 = 1.75 m
 
 
 def test_coarse_expert_data_do_not_depend_on_the_worker_count(office, office_ds, tmp_path):

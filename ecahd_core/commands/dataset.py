@@ -38,7 +38,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--waypoints", choices=("auto", "arclength", "corners"), default="auto",
                    help="rule of SD's sparse waypoints: arclength (the paper's, evenly spaced), "
                         "corners (the path's corners kept, the rest evenly on its legs), auto "
-                        "(corners on maps over 50 000 cells)")
+                        "(corners when the expert's median waypoint spacing exceeds 1.5 m)")
     p.add_argument("--out", required=True, help="dataset file to write (.npz)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 

@@ -55,7 +55,8 @@ def add_all_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--pairs", type=int, default=5000, help="expert start/goal pairs")
     p.add_argument("--waypoints", choices=("auto", "arclength", "corners"), default="auto",
                    help="rule of SD's sparse waypoints in the expert data (see `ecahd dataset "
-                        "--help`; auto: corners on maps over 50 000 cells)")
+                        "--help`; auto: corners when the expert's median waypoint spacing "
+                        "exceeds 1.5 m)")
     p.add_argument("--kinds", nargs="+", default=["sd", "dd"], choices=("sd", "dd", "fd"),
                    help="models to train: ECAHD needs SD and DD; add fd for the Full "
                         "Diffusion baseline of the benchmarks (about 8-10 more minutes)")
