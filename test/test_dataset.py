@@ -367,3 +367,4 @@ def test_command_writes_a_dataset(tmp_path, capsys):
     assert loaded.num_pairs == 3 and loaded.map_name == "maze2d-umaze"
     text = capsys.readouterr().out
     assert "kept 3 pairs" in text and "MB" in text and str(out) in text
+    assert "sparse waypoints: arclength rule, 10 per path" in text

@@ -174,7 +174,7 @@ def _clock(seconds_from_now: float) -> str:
 
 
 def run_all(args: argparse.Namespace) -> int:
-    from ecahd_core.dataset import generate_dataset
+    from ecahd_core.dataset import generate_dataset, waypoint_rule
     from ecahd_core.maps import load_map
     from ecahd_core.model_zoo import MODELS_DIR, MODELS_ENV, recipe, shipped_path
 
@@ -201,7 +201,8 @@ def run_all(args: argparse.Namespace) -> int:
                                progress=not args.no_progress)
     dataset.save(data_path)
     times = {"dataset": time.perf_counter() - t_start}
-    print(f"dataset: {dataset.num_pairs} pairs -> {data_path} ({times['dataset']:.0f} s); "
+    print(f"dataset: {dataset.num_pairs} pairs, {waypoint_rule(dataset)} waypoints -> "
+          f"{data_path} ({times['dataset']:.0f} s); "
           f"ETA {_clock(train_s)} (~{_duration(train_s)} of training)", flush=True)
     for kind in args.kinds:
         t0 = time.perf_counter()
