@@ -210,7 +210,8 @@ class ExpertSample:
         sparse: (P^g, 2) waypoints (evenly spaced by arc length, or by the corners rule), start
             first, goal last.
         sparse_h: {h: (h, 2)} for h = 2..P^g, the path from sparse waypoint P^g - h to the goal.
-        dense: (P^g - 1, P^l, 2), segment k runs from sparse[k] to sparse[k + 1].
+        dense: (P^g - 1, P^l, 2), segment k runs between arc-length waypoints k and k + 1
+            (``sparse``'s under the paper's rule).
         full: (F, 2) the whole path.
         length: path length [m].
         path: (N, 2) the expert polyline itself (kept in memory, not written to files).
@@ -238,27 +239,23 @@ def expert_sample(path, *, sparse_horizon: int = 10, dense_points: int = 4,
     Pg, Pl = sparse_horizon, dense_points
     total = float(cumulative_arclength(pts)[-1])
     s = np.linspace(0.0, total, Pg)  # arc length of the sparse waypoints [m]
-    even = resample_by_arclength(pts, Pg)  # (Pg, 2)
+    sparse = resample_by_arclength(pts, Pg)  # (Pg, 2)
 
     sparse_h = {}
-    if waypoints == "corners":
-        sparse = corner_waypoints(pts, Pg)
-        sparse_h = {h: sparse[Pg - h:].copy() for h in range(2, Pg + 1)}
-    else:
-        sparse = even
-        for h in range(2, Pg + 1):
-            k = Pg - h  # waypoints already reached
-            rest = points_at_arclength(pts, np.linspace(s[k], total, h))  # (h, 2)
-            rest[0], rest[-1] = sparse[k], sparse[-1]
-            sparse_h[h] = rest
+    for h in range(2, Pg + 1):
+        k = Pg - h  # waypoints already reached
+        rest = points_at_arclength(pts, np.linspace(s[k], total, h))  # (h, 2)
+        rest[0], rest[-1] = sparse[k], sparse[-1]
+        sparse_h[h] = rest
 
     dense = np.stack([points_at_arclength(pts, np.linspace(s[k], s[k + 1], Pl))
                       for k in range(Pg - 1)])  # (Pg - 1, Pl, 2)
-    dense[:, 0], dense[:, -1] = even[:-1], even[1:]
+    dense[:, 0], dense[:, -1] = sparse[:-1], sparse[1:]
 
     full = resample_by_arclength(pts, full_points)  # (F, 2)
-    return ExpertSample(sparse=sparse, sparse_h=sparse_h, dense=dense, full=full, length=total,
-                        path=pts)
+    sample = ExpertSample(sparse=sparse, sparse_h=sparse_h, dense=dense, full=full, length=total,
+                          path=pts)
+    return with_corner_waypoints(sample) if waypoints == "corners" else sample
 
 
 def with_corner_waypoints(sample: ExpertSample) -> ExpertSample:
@@ -567,12 +564,12 @@ def generate_dataset(grid: GridMap, *, pairs: int, seed: int, footprint_spec: st
         extra.update(max_spacing=float(max_spacing), split_paths=run.split_paths)
     samples = run.samples
     if waypoints == "auto":
-        waypoints = waypoint_rule_for(np.array([x.length for x in samples]), sparse_horizon)
+        lengths = [x.length for x in samples]
+        waypoints = waypoint_rule_for(lengths, sparse_horizon)
         if waypoints == "corners":
             samples = [with_corner_waypoints(x) for x in samples]
         log.info("waypoint rule %s: the expert's median waypoint spacing is %.2f m (corners "
-                 "above %.1f m)", waypoints,
-                 float(np.median([x.length for x in samples])) / (sparse_horizon - 1),
+                 "above %.1f m)", waypoints, median_spacing(lengths, sparse_horizon),
                  CORNERS_ABOVE_SPACING)
     elapsed = time.perf_counter() - t0
     log.info("kept %d expert paths in %d attempts (%d too short, %d unreachable) in %.1f s",
@@ -772,8 +769,14 @@ def waypoint_rule_for(lengths, sparse_horizon: int) -> str:
     """The "auto" waypoint rule for expert paths of these ``lengths`` (N,) [m]: "corners" when
     their median waypoint spacing, median length / (P^g - 1), exceeds ``CORNERS_ABOVE_SPACING``,
     else "arclength" (the paper's)."""
-    spacing = float(np.median(np.asarray(lengths, dtype=np.float64))) / (sparse_horizon - 1)
-    return "corners" if spacing > CORNERS_ABOVE_SPACING else "arclength"
+    return "corners" if median_spacing(lengths, sparse_horizon) > CORNERS_ABOVE_SPACING \
+        else "arclength"
+
+
+def median_spacing(lengths, sparse_horizon: int) -> float:
+    """[m] median waypoint spacing of P^g waypoints on paths of these ``lengths`` (N,) [m]:
+    median length / (P^g - 1)."""
+    return float(np.median(np.asarray(lengths, dtype=np.float64))) / (sparse_horizon - 1)
 
 
 def waypoint_rule(dataset: "ExpertDataset") -> str:

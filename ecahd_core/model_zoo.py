@@ -122,7 +122,8 @@ def training_arrays(kind: str, dataset) -> dict[int, np.ndarray]:
     of each expert path: the remaining path after the robot advanced (``sparse_h``, evenly spaced
     suffixes) and the whole path resampled to h points (other spacings, same start-goal
     distribution; with the "corners" waypoint rule the whole path's h corner waypoints of its
-    100-point view, :func:`~ecahd_core.dataset.corner_waypoints`). DD learns the P^l-point local segments, FD the 100-point sequences.
+    100-point view, :func:`~ecahd_core.dataset.corner_waypoints`). DD learns the P^l-point
+    local segments, FD the 100-point sequences.
     """
     from ecahd_core.dataset import resample_by_arclength
 

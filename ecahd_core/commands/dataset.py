@@ -46,9 +46,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    import numpy as np
-
-    from ecahd_core.dataset import generate_dataset, waypoint_rule
+    from ecahd_core.dataset import generate_dataset, median_spacing, waypoint_rule
     from ecahd_core.maps import load_map
 
     grid = load_map(args.map, args.resolution)
@@ -71,9 +69,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"kept {dataset.num_pairs} pairs of {p['attempts']} drawn; rejected {rejected} "
           f"({100.0 * rejected / p['attempts']:.1f} %: {p['rejected_short']} shorter than "
           f"{p['min_distance']} m, {p['rejected_unreachable']} unreachable)")
-    spacing = float(np.median(dataset.lengths)) / (dataset.sparse_horizon - 1)
     print(f"sparse waypoints: {waypoint_rule(dataset)} rule, {dataset.sparse_horizon} per path, "
-          f"median spacing {spacing:.2f} m")
+          f"median spacing {median_spacing(dataset.lengths, dataset.sparse_horizon):.2f} m")
     if "max_spacing" in p:
         print(f"{p['split_paths']} paths longer than {p['sparse_horizon'] - 1} x "
               f"{p['max_spacing']} m were cut into pieces, one pair each")
