@@ -141,6 +141,57 @@ def collision_free_rate(trajs: Sequence, footprint: Footprint, grid: GridMap, *,
                          float(np.mean([r.penetration_fraction for r in reports])))
 
 
+def segment_collisions(traj, footprint: Footprint, grid: GridMap, *,
+                       tolerance: float = DEFAULT_TOLERANCE) -> np.ndarray:
+    """Which segments of a trajectory collide, by one :func:`check_collision` of the whole of it.
+
+    Args:
+        traj: (N, 2) waypoints [m], N >= 1.
+        footprint, grid, tolerance: as in :func:`check_collision` (default step, no headings).
+
+    Returns:
+        (N - 1,) bool: a dense pose of segment i -> i + 1 (its end poses included) collides.
+        The dense poses are mapped back to segments by :func:`densify`'s counts
+        (n_i = max(1, ceil(length_i / step))); a colliding waypoint pose spoils both segments
+        that meet there.
+    """
+    path = _as_trajectory(traj)
+    if len(path) < 2:
+        return np.zeros(0, dtype=bool)
+    report = check_collision(path, footprint, grid, tolerance=tolerance)
+    bad = np.zeros(len(path) - 1, dtype=bool)
+    if report.collision_free:
+        return bad
+    step = grid.resolution / 4  # check_collision's default
+    length = np.linalg.norm(np.diff(path, axis=0), axis=1)
+    n = np.maximum(1, np.ceil(length / step - 1e-9)).astype(np.int64)
+    if int(n.sum()) + 1 != len(report.colliding):  # not densify's layout: judge one by one
+        return np.array([not check_collision(path[k:k + 2], footprint, grid,
+                                             tolerance=tolerance).collision_free
+                         for k in range(len(path) - 1)])
+    seg_of = np.append(np.repeat(np.arange(len(path) - 1), n), len(path) - 2)
+    hits = np.flatnonzero(report.colliding)
+    bad[seg_of[hits]] = True
+    # a colliding waypoint pose also spoils the segment that ends there
+    first = np.concatenate([[0], np.cumsum(n)])  # dense index of each waypoint
+    at_wp = np.flatnonzero(report.colliding[first[1:-1]]) if len(path) > 2 else []
+    bad[np.asarray(at_wp, dtype=np.int64)] = True
+    return bad
+
+
+def exact_check_for(grid: GridMap, footprint: Footprint, *,
+                    tolerance: float = DEFAULT_TOLERANCE):
+    """The exact checker as ``HierarchicalPlanner``'s ``exact_check``: a function of a path
+    (N, 2) [m] giving :func:`segment_collisions` (N - 1,) bool. Builds ``grid.free_distance``
+    (once per map) so that poses far from every wall pass at once."""
+    grid.free_distance  # noqa: B018
+
+    def exact_check(path) -> np.ndarray:
+        return segment_collisions(path, footprint, grid, tolerance=tolerance)
+
+    return exact_check
+
+
 def densify(traj, *, step: float, headings=None, turn_radius: float = 0.0) -> np.ndarray:
     """Interpolate waypoints densely by arc length.
 

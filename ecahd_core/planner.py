@@ -409,6 +409,8 @@ class HierarchicalPlan:
         polished: per iteration, whether polishing moved the local plan (see DenseConfig).
         placed: SD waypoints moved out of walls or added round them by the SparseDiffusion's
             ``placer``, summed over the iterations' SD plans.
+        exact_kept: per iteration, whether the exact rule (``HierarchicalPlanner``'s
+            ``exact_check``) put back the segment's straight or unpolished DD plan.
     """
 
     trajectory: np.ndarray
@@ -419,6 +421,7 @@ class HierarchicalPlan:
     timings_ms: dict
     polished: list = field(default_factory=list)
     placed: int = 0
+    exact_kept: list = field(default_factory=list)
 
     @property
     def dd_calls(self) -> int:
@@ -454,7 +457,8 @@ class LocalStages:
         c_before, c_after: (K,) c^l of the straight plans, and of ``plans``.
         dd_used: (K,) bool, DD ran (c_before > c_th).
         polished: (K,) bool, polishing ran on the plan (``joined``: moved it).
-        timings_ms: the batch's wall time of "j_check", "dd" and "polish".
+        timings_ms: the batch's wall time of "j_check", "dd", "polish" and "exact".
+        exact_kept: (K,) bool, the exact rule put back the straight or unpolished DD plan.
     """
 
     plans: torch.Tensor
@@ -463,6 +467,7 @@ class LocalStages:
     dd_used: torch.Tensor
     polished: torch.Tensor
     timings_ms: dict
+    exact_kept: torch.Tensor | None = None
 
 
 REPLAN_POLICIES = ("every_waypoint", "once")
@@ -486,14 +491,22 @@ class HierarchicalPlanner:
             waypoints are the global plan of every later iteration; in a static known map the
             replanned distribution is the same, so this trades resampling for ~P^g times less SD
             work).
+        exact_check: the exact rule (ours; None: off, the paper's). A function of a path
+            (N, 2) [m] float64 giving (N - 1,) bool, its segments that collide, e.g.
+            ``functools.partial(collision.segment_collisions, footprint=fp, grid=grid)``.
+            J (with its margin) only triggers DD and polishing; when the exact checker finds a
+            refined local plan in collision, the unpolished DD plan or else the straight one
+            is put back where the checker finds it free (its points then stay fixed while the
+            rest is polished again). Plans the checker finds free are never touched.
     """
 
     def __init__(self, sparse: SparseDiffusion, dense_checkpoint, *, costmap, footprint_points,
                  cost_config=None, dense: DenseConfig | None = None, device: str = "cpu",
-                 replan: str = "every_waypoint") -> None:
+                 replan: str = "every_waypoint", exact_check=None) -> None:
         if replan not in REPLAN_POLICIES:
             raise EcahdError(f"replan policy {replan!r} is not one of {list(REPLAN_POLICIES)}")
         self.replan = replan
+        self.exact_check = exact_check
         from ecahd_core.cost import CostConfig
         from ecahd_core.diffusion import DiffusionSampler, SamplerConfig
         from ecahd_core.model_zoo import DEFAULT_DENSE_POINTS, dense_points, sample_steps
@@ -600,9 +613,10 @@ class HierarchicalPlanner:
             LocalStages.
         """
         K, P_l = a.shape[0], self.dense.points
-        times = {"j_check": 0.0, "dd": 0.0, "polish": 0.0}
+        times = {"j_check": 0.0, "dd": 0.0, "polish": 0.0, "exact": 0.0}
         frac = torch.linspace(0.0, 1.0, P_l)[None, :, None]
-        local = a[:, None] + frac * (b - a)[:, None]  # (K, P^l, 2) LocalPlan
+        straight = a[:, None] + frac * (b - a)[:, None]  # (K, P^l, 2) LocalPlan
+        local = straight.clone()
         t0 = time.perf_counter()
         c = self.local_cost(local, b).float().cpu()  # (K,) line 14
         times["j_check"] = (time.perf_counter() - t0) * 1e3
@@ -620,17 +634,11 @@ class HierarchicalPlanner:
             times["dd"] = (time.perf_counter() - t0) * 1e3
         polished = torch.zeros(K, dtype=torch.bool)
         rough = (c_after > self.dense.c_th) if self.polishing else polished
+        unpolished = local.clone()
         if rough.any():
             t0 = time.perf_counter()
-            if joined:  # join, polish the whole path, split again
-                path = torch.cat([local[:1, 0], local[:, 1:].reshape(-1, 2)])[None]
-                fixed = torch.zeros(path.shape[1], dtype=torch.bool)
-                fixed[0], fixed[-1] = True, bool(end_fixed[-1])
-                path, _ = self.polish(path, fixed)
-                idx = torch.arange(K)[:, None] * (P_l - 1) + torch.arange(P_l)[None]
-                new = path[0][idx]  # (K, P^l, 2)
-                polished = (new - local).abs().amax(dim=(1, 2)) > 0
-                local = new
+            if joined:
+                local, polished = self._polish_joined(local, end_fixed)
                 c_after = self.local_cost(local, local[:, -1]).float().cpu()
             else:
                 idx = torch.nonzero(rough).flatten()
@@ -640,8 +648,76 @@ class HierarchicalPlanner:
                 local[idx], c_after[idx] = self.polish(local[idx], fixed)
                 polished = rough
             times["polish"] = (time.perf_counter() - t0) * 1e3
+        kept = torch.zeros(K, dtype=torch.bool)
+        if self.exact_check is not None and bool((used | polished).any()):
+            t0 = time.perf_counter()
+            local, polished, kept = self._exact_rule(straight, unpolished, local, polished,
+                                                     end_fixed, joined)
+            if kept.any():
+                c_after = self.local_cost(local, local[:, -1]).float().cpu()
+            times["exact"] = (time.perf_counter() - t0) * 1e3
         return LocalStages(plans=local, c_before=c, c_after=c_after, dd_used=used,
-                           polished=polished, timings_ms=times)
+                           polished=polished, timings_ms=times, exact_kept=kept)
+
+    def _polish_joined(self, local: torch.Tensor, end_fixed: torch.Tensor,
+                       frozen: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """Join K consecutive local plans (K, P^l, 2), polish the whole path with its start, its
+        end (where ``end_fixed[-1]``) and the points of the ``frozen`` (K,) segments fixed, and
+        split it again -> (plans (K, P^l, 2), moved (K,) bool)."""
+        K, P_l = local.shape[:2]
+        path = torch.cat([local[:1, 0], local[:, 1:].reshape(-1, 2)])[None]
+        fixed = torch.zeros(path.shape[1], dtype=torch.bool)
+        fixed[0], fixed[-1] = True, bool(end_fixed[-1])
+        idx = torch.arange(K)[:, None] * (P_l - 1) + torch.arange(P_l)[None]  # (K, P^l)
+        if frozen is not None:
+            fixed[idx[frozen].flatten()] = True
+        path, _ = self.polish(path, fixed)
+        new = path[0][idx]
+        return new, (new - local).abs().amax(dim=(1, 2)) > 0
+
+    def _colliding(self, plans: torch.Tensor, joined: bool) -> torch.Tensor:
+        """The exact checker's verdict on K local plans (K, P^l, 2) -> (K,) bool (collides);
+        consecutive (``joined``) plans are checked as one path."""
+        K, P_l = plans.shape[:2]
+        if joined:
+            path = torch.cat([plans[:1, 0], plans[:, 1:].reshape(-1, 2)]).double().numpy()
+            bad = np.asarray(self.exact_check(path), dtype=bool).reshape(K, P_l - 1)
+            return torch.as_tensor(bad.any(axis=1))
+        return torch.tensor([bool(np.any(self.exact_check(p.double().numpy()))) for p in plans],
+                            dtype=torch.bool)
+
+    def _exact_rule(self, straight: torch.Tensor, unpolished: torch.Tensor, local: torch.Tensor,
+                    polished: torch.Tensor, end_fixed: torch.Tensor, joined: bool
+                    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The exact rule (``exact_check``) on K local plans, all (K, P^l, 2): where the checker
+        finds ``local[k]`` in collision, ``unpolished[k]`` (DD's or the straight plan) or else
+        ``straight[k]`` if it finds that free. When the plans were polished as one joined path
+        (``joined``), the kept plans' points are fixed and the others polished again from
+        ``unpolished``; that result is taken only if fewer segments collide.
+        Returns (plans, polished, kept), kept: (K,) bool."""
+        K = local.shape[0]
+        kept = torch.zeros(K, dtype=torch.bool)
+        bad = self._colliding(local, joined)
+        if not bad.any():
+            return local, polished, kept
+        choice = unpolished.clone()
+        for k in torch.nonzero(bad).flatten().tolist():
+            options = [unpolished[k]] if torch.equal(unpolished[k], straight[k]) else [
+                unpolished[k], straight[k]]
+            for plan in options:
+                if not np.any(self.exact_check(plan.double().numpy())):
+                    choice[k], kept[k] = plan, True
+                    break
+        if not kept.any():
+            return local, polished, kept
+        if joined and bool(polished.any()):
+            new, moved = self._polish_joined(choice, end_fixed, frozen=kept)
+            if int(self._colliding(new, joined).sum()) >= int(bad.sum()):
+                return local, polished, torch.zeros(K, dtype=torch.bool)
+            return new, moved & ~kept, kept
+        out = local.clone()
+        out[kept] = choice[kept]
+        return out, polished & ~kept, kept
 
     def resample_segment(self, a: torch.Tensor, b: torch.Tensor, *, samples: int,
                          generator: torch.Generator | None = None
@@ -736,7 +812,7 @@ class HierarchicalPlanner:
                                 local_costs=list(zip(stages.c_before.tolist(),
                                                      stages.c_after.tolist())),
                                 timings_ms=times, polished=stages.polished.tolist(),
-                                placed=placed)
+                                placed=placed, exact_kept=stages.exact_kept.tolist())
 
 
 class FullDiffusion:

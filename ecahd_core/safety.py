@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ecahd_core.collision import DEFAULT_TOLERANCE, check_collision
+from ecahd_core.collision import DEFAULT_TOLERANCE, check_collision, segment_collisions
 from ecahd_core.errors import EcahdError, PlanningError
 from ecahd_core.footprint import Footprint
 from ecahd_core.maps import GridMap
@@ -39,7 +39,6 @@ log = logging.getLogger(__name__)
 
 SAFETY_RULES = ("none", "retry", "fallback", "unsafe")
 FALLBACKS = ("astar", "none")
-_ZERO_LENGTH = 1e-9  # [m] collision.py's: shorter segments have no direction of their own
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -310,27 +309,7 @@ class SafetyNet:
         return "the fallback did not converge"
 
     def _bad_segments(self, path: np.ndarray) -> np.ndarray:
-        """(N, 2) path -> (N - 1,) bool: the exact checker finds a pose of segment i -> i + 1
-        (its end poses included) in collision. One check of the whole path; its dense poses are
-        mapped back to segments by ``collision.densify``'s counts (no headings: n_i =
-        max(1, ceil(length_i / step)))."""
-        if len(path) < 2:
-            return np.zeros(0, dtype=bool)
-        report = self.check(path)
-        bad = np.zeros(len(path) - 1, dtype=bool)
-        if report.collision_free:
-            return bad
-        step = self.grid.resolution / 4  # check_collision's default
-        length = np.linalg.norm(np.diff(path, axis=0), axis=1)
-        n = np.maximum(1, np.ceil(length / step - 1e-9)).astype(np.int64)
-        if int(n.sum()) + 1 != len(report.colliding):  # not densify's layout: judge one by one
-            return np.array([not self.check(path[k:k + 2]).collision_free
-                             for k in range(len(path) - 1)])
-        seg_of = np.append(np.repeat(np.arange(len(path) - 1), n), len(path) - 2)
-        hits = np.flatnonzero(report.colliding)
-        bad[seg_of[hits]] = True
-        # a colliding waypoint pose also spoils the segment that ends there
-        first = np.concatenate([[0], np.cumsum(n)])  # dense index of each waypoint
-        at_wp = np.flatnonzero(report.colliding[first[1:-1]]) if len(path) > 2 else []
-        bad[np.asarray(at_wp, dtype=np.int64)] = True
-        return bad
+        """(N, 2) path -> (N - 1,) bool: ``collision.segment_collisions`` with this net's
+        footprint, map and tolerance."""
+        return segment_collisions(path, self.footprint, self.grid,
+                                  tolerance=self.config.tolerance)

@@ -7,7 +7,7 @@ segment collide, does the local stage's plan (DD + polishing) still collide; by 
 
     ECAHD_MODELS=DIR python scripts/diagnose_segments.py MAP.yaml [--problems 16] [--seed 7]
         [--max-spacing M] [--place REACH [--leg-rounds N]] [--candidates N]
-        [--selection RULE] [--png FILE]
+        [--selection RULE] [--no-exact-rule] [--png FILE]
 """
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ import time
 import numpy as np
 import torch
 
-from ecahd_core.collision import DEFAULT_TOLERANCE, check_collision, pose_depths
+from ecahd_core.collision import DEFAULT_TOLERANCE, check_collision, exact_check_for, pose_depths
 from ecahd_core.cost import CollisionCost, CostConfig
 from ecahd_core.footprint import make_footprint
 from ecahd_core.maps import load_map
@@ -50,6 +50,8 @@ def main() -> None:
                     help="a segment still colliding after the local stage gets an SD plan of H "
                          "waypoints between its ends (best of N, placed), whose legs get the "
                          "local stage; twice at most (0: off)")
+    ap.add_argument("--exact-rule", action=argparse.BooleanOptionalAction, default=True,
+                    help="HierarchicalPlanner's exact rule (the commands' default)")
     ap.add_argument("--png", help="draw up to 8 segments still colliding after the local stage")
     args = ap.parse_args()
     torch.set_num_threads(1)
@@ -62,7 +64,8 @@ def main() -> None:
                              grid, fp, reach=args.place, leg_rounds=args.leg_rounds))
     hd = HierarchicalPlanner(sd, load_model("dd", grid, footprint=fp), costmap=cost[0],
                              footprint_points=cost[1], cost_config=cost[2], dense=DenseConfig(),
-                             replan="once")
+                             replan="once",
+                             exact_check=exact_check_for(grid, fp) if args.exact_rule else None)
     gen = torch.Generator().manual_seed(0)
     rows = []  # (length [m], an end in a wall, straight free, local plan free)
     bad_ends = []  # (a, b) [m] of every segment still colliding after the local stage

@@ -33,7 +33,7 @@ def test_algorithm1_reaches_goal_in_pg_iterations():
     # consecutive local plans are joined end to start
     for a, b in zip(plan.segments, plan.segments[1:]):
         assert np.allclose(a[-1], b[0])
-    assert set(plan.timings_ms) == {"sd", "j_check", "dd", "polish", "total"}
+    assert set(plan.timings_ms) == {"sd", "j_check", "dd", "polish", "exact", "total"}
 
 
 @pytest.mark.parametrize("c_th", [0.1, 1e9])
@@ -128,6 +128,66 @@ def test_keep_better_never_accepts_a_dd_plan_costlier_than_the_straight_one(keep
             assert c_after <= c_before and not (through_wall and c_after > c_before)
         elif c_before > 0.0:
             assert through_wall  # the paper accepts DD's plan whatever it costs
+
+
+def _speck_checker(specks, radius):
+    """A stand-in exact checker: segment i -> i + 1 of a path collides when it passes within
+    ``radius`` of a speck. path (N, 2) -> (N - 1,) bool."""
+    def check(path):
+        a, b = path[:-1, None], path[1:, None]  # (N - 1, 1, 2)
+        ab = b - a
+        t = np.clip(((specks[None] - a) * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-12),
+                    0.0, 1.0)
+        d = np.linalg.norm(a + t[..., None] * ab - specks[None], axis=-1)  # (N - 1, S)
+        return (d < radius).any(axis=1)
+    return check
+
+
+@pytest.mark.parametrize("replan", ["every_waypoint", "once"])
+def test_exact_rule_puts_back_a_free_plan_where_the_refined_one_collides(replan):
+    fp = make_footprint("circle")
+    cc = CostConfig()
+    sd = SparseDiffusion(load_model("sd", GRID, footprint=fp), SparseConfig(num_candidates=4))
+    start, goal = np.array([1.5, 1.5]), np.array([10.5, 7.5])
+
+    def plan_with(check):
+        hd = HierarchicalPlanner(sd, load_model("dd", GRID, footprint=fp),
+                                 costmap=cc.make_costmap(GRID), footprint_points=fp.points,
+                                 cost_config=cc, replan=replan, exact_check=check)
+        return hd.plan(start, goal, generator=torch.Generator().manual_seed(0))
+
+    base = plan_with(None)
+    assert base.exact_kept == [False] * len(base.segments)
+    # a speck on every refined segment's point farthest from its straight line, so that the
+    # refined plan collides and the straight one (and DD's plan when it is near it) does not
+    specks, radii = [], []
+    for seg, used, pol in zip(base.segments, base.dd_segments, base.polished):
+        if not (used or pol):
+            continue
+        line = np.linspace(seg[0], seg[-1], len(seg))
+        off = np.linalg.norm(seg - line, axis=1)
+        if off.max() > 1e-3:
+            specks.append(seg[int(off.argmax())])
+            radii.append(0.4 * off.max())
+    assert specks, "no refined segment on this problem"
+    specks = np.array(specks)
+    radius = min(radii)
+    check = _speck_checker(specks, radius)
+    assert check(base.trajectory).any()
+    ours = plan_with(check)
+    assert any(ours.exact_kept)
+    # every kept segment is free by the checker, and is the straight or an unpolished plan
+    for seg, kept in zip(ours.segments, ours.exact_kept):
+        if kept:
+            assert not check(seg).any()
+    assert check(ours.trajectory).sum() < check(base.trajectory).sum()
+    assert np.allclose(ours.trajectory[0], start) and np.allclose(ours.trajectory[-1], goal,
+                                                                  atol=1e-5)
+    for a, b in zip(ours.segments, ours.segments[1:]):
+        assert np.allclose(a[-1], b[0])  # still joined end to start
+    # a checker that finds everything free changes nothing
+    same = plan_with(lambda path: np.zeros(len(path) - 1, dtype=bool))
+    assert np.array_equal(same.trajectory, base.trajectory) and not any(same.exact_kept)
 
 
 def test_resample_segment_gives_a_batch_of_dd_plans_between_fixed_ends():

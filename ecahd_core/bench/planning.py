@@ -84,6 +84,7 @@ class PlanningBenchSettings:
     dd_retries: int = 0
     polish_steps: int = 30  # DenseConfig's default; 0 = the paper's Algorithm 1
     keep_better: bool = True  # DenseConfig's default; False = the paper's Algorithm 1
+    exact_rule: bool = True  # ours: HierarchicalPlanner.exact_check (not on Table II's variants)
     replan: str = "every_waypoint"
     max_spacing: float | None = None  # [m] SparseConfig.max_spacing (None: off)
     place_reach: float | None = None  # [m] placement.placer_for (0: off; None: by map size)
@@ -111,6 +112,7 @@ class CellResult:
     dd_ratio: float
     problems: int
     variant: str = ""  # Table II: cost mode (+ dilation)
+    exact_rule_rate: float | None = None  # HD: % of plans where the exact rule acted
     # the same paths through the safety net (HD cells when settings.safety_net; None otherwise)
     net_collision_free: float | None = None  # % after the net
     net_success_free: float | None = None
@@ -166,6 +168,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
     from tqdm import tqdm
 
     from ecahd_core.astar import clearance_for_footprint, planner_for
+    from ecahd_core.collision import exact_check_for
     from ecahd_core.cost import CollisionCost, CostConfig
     from ecahd_core.footprint import make_footprint
     from ecahd_core.maps import load_map
@@ -222,7 +225,10 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                                              retries=settings.dd_retries,
                                              polish_steps=settings.polish_steps,
                                              keep_better=settings.keep_better),
-                                         replan=settings.replan)
+                                         replan=settings.replan,
+                                         exact_check=(exact_check_for(grid, fp)
+                                                      if settings.exact_rule and not variant
+                                                      else None))
 
                 last = []  # the last HierarchicalPlan, for the net's retries
 
@@ -235,7 +241,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                     net = SafetyNet(grid, fp, SafetyNetConfig(retries=settings.net_retries),
                                     planner=hd, astar=astar_for(robot, fp))
                     net_gen = torch.Generator().manual_seed(settings.sample_seed + 1)
-        paths, times, dd = [], [], []
+        paths, times, dd, kept = [], [], [], []
         net_paths, net_times, net_rules = [], [], []
         label = f"{METHOD_LABELS[method]}{' guided' if guidance else ''} {robot} {variant}".strip()
         for prob in tqdm(problems, desc=label, disable=not progress, leave=False):
@@ -245,6 +251,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
             paths.append(np.asarray(path, dtype=np.float64))
             if dd_segs is not None:
                 dd.extend(dd_segs)
+                kept.append(any(last[0].exact_kept))
             if net is not None:  # the same path through the net, timed on its own
                 safe = net.apply(paths[-1], segments=last[0].segments, generator=net_gen)
                 net_paths.append(safe.path)
@@ -252,6 +259,8 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                 net_rules.append(safe.rule)
         cell = _judge(paths, times, dd, problems, fp, grid, method=method, guidance=guidance,
                       robot=robot, variant=variant)
+        if kept:
+            cell.exact_rule_rate = 100 * float(np.mean(kept))
         if net is not None:
             after = _judge(net_paths, net_times, dd, problems, fp, grid, method=method,
                            guidance=guidance, robot=robot)
@@ -290,7 +299,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                "guidance_weight": settings.guidance_weight, "c_th": settings.c_th,
                "guidance_space": settings.guidance_space, "margin": settings.margin,
                "dd_retries": settings.dd_retries, "polish_steps": settings.polish_steps,
-               "keep_better": settings.keep_better,
+               "keep_better": settings.keep_better, "exact_rule": settings.exact_rule,
                "replan": settings.replan, "warm_fraction": settings.warm_fraction,
                "max_spacing": settings.max_spacing, "place_reach": place_reach,
                "safety_net": settings.safety_net, "net_retries": settings.net_retries,
@@ -319,6 +328,7 @@ def format_markdown(r: PlanningBenchResult) -> str:
              f"cost-map margin {c['margin']} m, DD retries {c['dd_retries']}, "
              f"polishing steps {c.get('polish_steps', 0)}, "
              f"keep the straight plan when DD is worse: {c.get('keep_better', False)}, "
+             f"exact rule: {c.get('exact_rule', False)}, "
              f"SD replanning {c['replan']}"
              + (f" warm-started at {c['warm_fraction']:g} of the schedule"
                 if c.get("warm_fraction") and c["replan"] == "every_waypoint" else "")
@@ -366,16 +376,21 @@ def format_markdown(r: PlanningBenchResult) -> str:
         lines += ["", f"The safety net (ours, beyond the paper; DD retries "
                   f"{c.get('net_retries', '–')}, then A* for the offending stretches): the same "
                   "paths without / with the net. Retry, fallback and unsafe: share of plans where "
-                  "that rule acted last.", "",
-                  "| method | guidance | robot | collision-free % | success & free % | retry % | "
-                  "fallback % | unsafe % | time mean ms | time median ms | time p95 ms |",
-                  "|---|---|---|---|---|---|---|---|---|---|---|"]
+                  "that rule acted last. Exact rule: share of plans where the planner itself put "
+                  "back a straight or unpolished local plan the exact checker finds free "
+                  "(HierarchicalPlanner's exact_check; counted in ECAHD alone).", "",
+                  "| method | guidance | robot | collision-free % | success & free % | exact rule % "
+                  "| retry % | fallback % | unsafe % | time mean ms | time median ms | "
+                  "time p95 ms |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for x in netted:
             lines.append(
                 f"| {METHOD_LABELS[x.method]}{' (ECAHD)' if x.guidance else ''} | "
                 f"{'✓' if x.guidance else '×'} | {x.robot} | "
                 f"{x.collision_free:.1f} → {x.net_collision_free:.1f} | "
-                f"{x.success_free:.1f} → {x.net_success_free:.1f} | {x.net_retry_rate:.1f} | "
+                f"{x.success_free:.1f} → {x.net_success_free:.1f} | "
+                f"{'–' if x.exact_rule_rate is None else f'{x.exact_rule_rate:.1f}'} | "
+                f"{x.net_retry_rate:.1f} | "
                 f"{x.net_fallback_rate:.1f} | {x.net_unsafe_rate:.1f} | "
                 f"{x.time_ms_mean:.1f} → {x.net_time_ms_mean:.1f} | "
                 f"{x.time_ms_median:.1f} → {x.net_time_ms_median:.1f} | "

@@ -200,6 +200,10 @@ def _add_planning_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-keep-better", action="store_true",
                         help="accept DD's plan even when J says the straight one was cheaper "
                              "(the paper's rule; ours keeps the cheaper)")
+    parser.add_argument("--no-exact-rule", action="store_true",
+                        help="HD: keep a refined local plan the exact checker finds colliding "
+                             "even where the straight or unpolished one is free (ours: put "
+                             "that back)")
     parser.add_argument("--replan", default=d.replan, choices=("every_waypoint", "once"),
                         help="HD: SD best-of-N at every waypoint (Algorithm 1) or once")
     parser.add_argument("--warm-fraction", type=float, default=d.warm_fraction, metavar="F",
@@ -232,8 +236,8 @@ def _run_planning(args: argparse.Namespace) -> int:
         selection=args.selection,
         guidance_weight=args.omega, guidance_space=args.guidance_space, margin=args.margin,
         c_th=args.c_th, dd_retries=args.dd_retries, polish_steps=args.polish_steps,
-        keep_better=not args.no_keep_better, replan=args.replan,
-        warm_fraction=args.warm_fraction, max_spacing=args.max_spacing,
+        keep_better=not args.no_keep_better, exact_rule=not args.no_exact_rule,
+        replan=args.replan, warm_fraction=args.warm_fraction, max_spacing=args.max_spacing,
         place_reach=args.place_reach, ablation=not args.no_ablation, precision=args.precision)
     result = run_planning_benchmark(settings, progress=not args.no_progress)
     md = format_markdown(result)

@@ -83,6 +83,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-keep-better", action="store_true",
                    help="ECAHD/HD: accept DD's plan even when J finds the straight one cheaper "
                         "(the paper's rule)")
+    p.add_argument("--no-exact-rule", action="store_true",
+                   help="ECAHD/HD: keep a refined local plan the exact checker finds colliding "
+                        "even where the straight or unpolished one is free (ours: put that "
+                        "back)")
     add_replan_argument(p)
     p.add_argument("--safety-net", action=argparse.BooleanOptionalAction, default=True,
                    help="ours, beyond the paper: judge the plan by the exact checker; when it "
@@ -219,7 +223,7 @@ def _plan_diffusion(args, grid, footprint, start, goal):
     import numpy as np
     import torch
 
-    from ecahd_core.collision import densify
+    from ecahd_core.collision import densify, exact_check_for
     from ecahd_core.cost import CollisionCost
     from ecahd_core.model_zoo import load_model
     from ecahd_core.placement import placer_for
@@ -258,7 +262,9 @@ def _plan_diffusion(args, grid, footprint, start, goal):
                 0, None, None, None, plan.placed)
     hd = HierarchicalPlanner(sd, load_model("dd", grid, path=args.dd_model, footprint=footprint),
                              costmap=cost[0], footprint_points=cost[1], cost_config=cost[2],
-                             dense=DenseConfig(guidance=guided, **polish), replan=args.replan)
+                             dense=DenseConfig(guidance=guided, **polish), replan=args.replan,
+                             exact_check=(None if args.no_exact_rule
+                                          else exact_check_for(grid, footprint)))
     hd.plan(start, goal, generator=gen())  # warm-up
     plan = hd.plan(start, goal, generator=gen())
     # footprint outlines where DD fired
