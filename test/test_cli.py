@@ -83,6 +83,7 @@ def test_plan_ecahd_replan_policies_and_the_safety_net_record(tmp_path, replan):
     assert isinstance(r["collision_free_before_net"], bool)
     assert r["collision_free_before_net"] == (r["rule"] == "none")
     assert isinstance(r["fallback_stretches"], list) and r["timings_ms"]["safety_net"] > 0
+    assert 0 <= r["exact_rule_segments"] <= len(r["waypoints"]) and "exact" in r["timings_ms"]
 
 
 def test_plan_sd_through_walls_is_repaired_by_the_fallback(tmp_path):

@@ -117,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
     goal = grid.validate_point(args.goal, "goal")
 
     candidates, dd_calls, dd_poses, segments, hd, astar = [], 0, None, None, None, None
-    placed = 0
+    counts = {"waypoints_placed": 0, "exact_rule_segments": 0}
     if args.method == "astar":
         t0 = time.perf_counter()
         planner = planner_for(grid, clearance_for_footprint(footprint, padding=args.padding))
@@ -129,7 +129,7 @@ def run(args: argparse.Namespace) -> int:
                    "total": (t2 - t0) * 1e3}
         astar = planner  # the net's fallback plans with the same clearance: reuse it
     else:
-        path, waypoints, candidates, timings, dd_calls, dd_poses, segments, hd, placed = \
+        path, waypoints, candidates, timings, dd_calls, dd_poses, segments, hd, counts = \
             _plan_diffusion(args, grid, footprint, start, goal)
     safe = None
     if args.safety_net:
@@ -178,7 +178,7 @@ def run(args: argparse.Namespace) -> int:
             "length_m": length, "success": success,
             "collision_free": bool(report.collision_free),
             "penetration_fraction": float(report.penetration_fraction),
-            "timings_ms": timings, "dd_calls": dd_calls, "waypoints_placed": placed,
+            "timings_ms": timings, "dd_calls": dd_calls, **counts,
             "replan": args.replan if args.method in ("ecahd", "hd") else None,
             "precision": (resolve_precision(args.precision)
                           if args.method in ("ecahd", "hd", "sd") else None),
@@ -218,8 +218,8 @@ def _guided(args) -> bool:
 
 def _plan_diffusion(args, grid, footprint, start, goal):
     """SD / FD / HD / ECAHD -> (path, waypoints, candidates, timings, dd_calls, dd_poses,
-    local segments (HD / ECAHD, else None), the HierarchicalPlanner (else None), SD waypoints
-    the placer moved or added)."""
+    local segments (HD / ECAHD, else None), the HierarchicalPlanner (else None), counts for the
+    JSON: SD waypoints the placer moved or added, local segments the exact rule put back)."""
     import numpy as np
     import torch
 
@@ -246,7 +246,7 @@ def _plan_diffusion(args, grid, footprint, start, goal):
         path = fd.plan(start, goal, generator=gen())
         ms = (time.perf_counter() - t0) * 1e3
         return (path, path[:: max(1, len(path) // 10)], [], {"fd": ms, "total": ms}, 0, None,
-                None, None, 0)
+                None, None, {"waypoints_placed": 0, "exact_rule_segments": 0})
     sd = SparseDiffusion(load_model("sd", grid, path=args.sd_model, footprint=footprint,
                                     horizon=args.waypoints),
                          SparseConfig(num_candidates=args.candidates, horizon=args.waypoints,
@@ -259,7 +259,8 @@ def _plan_diffusion(args, grid, footprint, start, goal):
         plan = sd.plan(start, goal, generator=gen())
         others = [c for i, c in enumerate(plan.candidates) if i != plan.best]
         return (plan.waypoints, plan.waypoints, others, {"sd": plan.time_ms, "total": plan.time_ms},
-                0, None, None, None, plan.placed)
+                0, None, None, None,
+                {"waypoints_placed": plan.placed, "exact_rule_segments": 0})
     hd = HierarchicalPlanner(sd, load_model("dd", grid, path=args.dd_model, footprint=footprint),
                              costmap=cost[0], footprint_points=cost[1], cost_config=cost[2],
                              dense=DenseConfig(guidance=guided, **polish), replan=args.replan,
@@ -272,4 +273,5 @@ def _plan_diffusion(args, grid, footprint, start, goal):
     dd_poses = (np.concatenate([densify(seg, step=0.15) for seg in refined])
                 if refined else np.zeros((0, 3)))
     return (plan.trajectory, plan.global_plans[0], [], dict(plan.timings_ms), plan.dd_calls,
-            dd_poses, plan.segments, hd, plan.placed)
+            dd_poses, plan.segments, hd, {"waypoints_placed": plan.placed,
+                                          "exact_rule_segments": int(sum(plan.exact_kept))})
