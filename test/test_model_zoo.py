@@ -127,6 +127,32 @@ def test_train_all_tiny(tmp_path):
         assert ckpt.training_state is None and ckpt.meta["dataset_pairs"] == 6
 
 
+def test_train_all_fits_its_steps_to_a_time_budget(tmp_path, capsys, monkeypatch):
+    import re
+
+    from ecahd_core.commands import train
+    from ecahd_core.commands.train import BUDGET_FILL, budget_scale
+
+    assert budget_scale(100.0, {"sd": 30.0, "dd": 20.0}) == pytest.approx(2 * BUDGET_FILL)
+    with pytest.raises(EcahdError, match="budget is spent"):
+        budget_scale(-5.0, {"sd": 30.0})
+    args = ["train-all", "--map", "maze2d-umaze", "--pairs", "6", "--work-dir",
+            str(tmp_path / "work"), "--out-dir", str(tmp_path / "models"), "--no-progress"]
+    # a slow machine (0.1 s a step): 3 s leave a few steps of every recipe
+    monkeypatch.setattr(train, "seconds_per_step", lambda *a, **k: 0.1)
+    assert main(args + ["--minutes", "0.05"]) == 0
+    out = capsys.readouterr().out
+    found = re.search(r"budget: recipes' steps x ([0-9.]+) \(SD (\d+), DD (\d+)\)", out)
+    assert found, out
+    scale, sd, dd = float(found[1]), int(found[2]), int(found[3])
+    assert 0 < scale < BUDGET_FILL * 3 / (0.1 * RECIPES["sd"].steps) 
+    # one factor on every recipe (the printed factor has 3 digits)
+    assert abs(sd - RECIPES["sd"].steps * scale) <= 1 + 0.01 * sd
+    assert abs(dd - RECIPES["dd"].steps * scale) <= 1 + 0.01 * dd
+    assert re.search(rf"^sd: {sd} steps", out, re.M) and re.search(rf"^dd: {dd} steps", out, re.M)
+    assert main(args + ["--minutes", "1", "--steps-scale", "2"]) == 2  # one or the other
+
+
 def test_models_are_found_through_ecahd_models(tmp_path, monkeypatch):
     from ecahd_core.model_zoo import MODELS_DIR, model_search_path, shipped_path
 

@@ -16,6 +16,7 @@ import logging
 import time
 from pathlib import Path
 
+from ecahd_core.errors import EcahdError
 from ecahd_core.threads import (add_precision_argument, add_threads_argument, resolve_precision,
                                 set_torch_threads, training_threads)
 
@@ -65,6 +66,12 @@ def add_all_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out-dir", default=None,
                    help="inference-only models go here (default: the package's models folder; "
                         "another folder is found through $ECAHD_MODELS)")
+    p.add_argument("--minutes", type=float, default=None, metavar="M",
+                   help="a time budget: once the dataset is made, every recipe's step count is "
+                        "scaled by one factor so that training ends about M minutes after the "
+                        "start, by step times measured on this machine (more steps on a fast "
+                        "machine, fewer on a slow one; replaces --steps-scale). Default: the "
+                        "recipes' steps")
     _add_common(p)
 
 
@@ -164,6 +171,22 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+# share of a --minutes budget left to training that the step-time estimate may fill: the
+# estimate ran 2-8% short in full runs (docs/RESULTS.md), and checkpoints take their time too
+BUDGET_FILL = 0.9
+
+
+def budget_scale(seconds_left: float, recipe_seconds: dict) -> float:
+    """The one factor on every recipe's step count that fills ``seconds_left`` [s] of training
+    (``BUDGET_FILL`` of it), given each kind's estimated time at its recipe's steps [s]."""
+    total = sum(recipe_seconds.values())
+    if seconds_left <= 0 or total <= 0:
+        raise EcahdError(f"the time budget is spent before training starts "
+                         f"({seconds_left / 60:.1f} min left after the dataset): give "
+                         f"--minutes more room, or fewer --pairs")
+    return BUDGET_FILL * seconds_left / total
+
+
 def _duration(seconds: float) -> str:
     return f"{seconds:.0f} s" if seconds < 90 else f"{seconds / 60:.0f} min"
 
@@ -185,30 +208,49 @@ def run_all(args: argparse.Namespace) -> int:
     grid = load_map(args.map)
     out_dir = Path(args.out_dir) if args.out_dir else MODELS_DIR
     t_start = time.perf_counter()
+    if args.minutes is not None and not (args.minutes > 0 and args.steps_scale == 1.0):
+        raise EcahdError(f"--minutes must be > 0 and replaces --steps-scale, got --minutes "
+                         f"{args.minutes} with --steps-scale {args.steps_scale}")
     # an ETA from the start: each model's step time measured now, the dataset has its own bar
-    steps = {k: max(1, int(round(recipe(k).steps * args.steps_scale))) for k in args.kinds}
-    estimate = {k: steps[k] * seconds_per_step(k, grid, device=args.device, precision=precision)
+    per_step = {k: seconds_per_step(k, grid, device=args.device, precision=precision)
                 for k in args.kinds}
+    scale = args.steps_scale
+    steps = {k: max(1, int(round(recipe(k).steps * scale))) for k in args.kinds}
+    estimate = {k: steps[k] * per_step[k] for k in args.kinds}
     train_s = sum(estimate.values())
+    plan = (f"training until ~{_clock(args.minutes * 60)} ({args.minutes:g} min from now), its "
+            f"steps set once the dataset is made" if args.minutes is not None else
+            ", ".join(f"{k.upper()} {steps[k]} steps ~{_duration(estimate[k])}"
+                      for k in args.kinds) + f": training ~{_duration(train_s)} after the dataset")
     print(f"train-all on {grid.name}: {args.pairs} expert pairs (progress bar below), then "
-          + ", ".join(f"{k.upper()} {steps[k]} steps ~{_duration(estimate[k])}"
-                      for k in args.kinds)
-          + f": training ~{_duration(train_s)} after the dataset (step times measured "
-            f"in {time.perf_counter() - t_start:.0f} s; {precision})", flush=True)
+          f"{plan} (step times measured in {time.perf_counter() - t_start:.0f} s; {precision})",
+          flush=True)
     data_path = work / f"{grid.name}_{args.robot}_{args.pairs}_s{args.seed}.npz"
     dataset = generate_dataset(grid, pairs=args.pairs, seed=args.seed, footprint_spec=args.robot,
                                waypoints=args.waypoints,
                                progress=not args.no_progress)
     dataset.save(data_path)
     times = {"dataset": time.perf_counter() - t_start}
+    if args.minutes is not None:
+        scale = budget_scale(args.minutes * 60 - times["dataset"],
+                             {k: recipe(k).steps * per_step[k] for k in args.kinds})
+        steps = {k: max(1, int(round(recipe(k).steps * scale))) for k in args.kinds}
+        estimate = {k: steps[k] * per_step[k] for k in args.kinds}
+        train_s = sum(estimate.values())
+        if scale < 0.5:
+            log.warning("the %g min budget leaves the models %.0f%% of their recipes' steps: "
+                        "expect worse plans", args.minutes, 100 * scale)
     print(f"dataset: {dataset.num_pairs} pairs, {waypoint_rule(dataset)} waypoints -> "
           f"{data_path} ({times['dataset']:.0f} s); "
-          f"ETA {_clock(train_s)} (~{_duration(train_s)} of training)", flush=True)
+          + (f"{args.minutes:g} min budget: recipes' steps x {scale:.3g} ("
+             + ", ".join(f"{k.upper()} {steps[k]}" for k in args.kinds) + "); "
+             if args.minutes is not None else "")
+          + f"ETA {_clock(train_s)} (~{_duration(train_s)} of training)", flush=True)
     for kind in args.kinds:
         t0 = time.perf_counter()
         ship = out_dir / shipped_path(grid.name, kind).name
         result = train_one(kind, dataset, out=work / f"{grid.name}_{kind}.pt", seed=args.seed,
-                           device=args.device, steps_scale=args.steps_scale, ship=ship,
+                           device=args.device, steps_scale=scale, ship=ship,
                            precision=precision,
                            progress=not args.no_progress)
         times[kind] = time.perf_counter() - t0
