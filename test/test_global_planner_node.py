@@ -191,6 +191,23 @@ def test_new_goal_preempts_and_waypoints_shrink_the_horizon(rig):
     assert np.allclose(xy2[0], xy[1] + [0.1, 0.0])
 
 
+def test_warm_fraction_starts_a_waypoint_replan_from_the_rest_of_the_plan(rig):
+    r = rig(num_candidates=4, warm_fraction=0.3)
+    ready(r)
+    warm = []  # each SD plan's warm start (None: from noise)
+    original = r.planner.sparse.plan
+    r.planner.sparse.plan = lambda *a, **k: warm.append(k.get("warm_start")) or original(*a, **k)
+    r.send_goal(GOAL)
+    r.spin_until(lambda: r.plans)
+    xy = path_to_xy(r.plans[-1])
+    r.send_odom(xy[1] + [0.1, 0.0])  # the next waypoint reached
+    r.spin_until(lambda: len(r.plans) >= 2)
+    assert warm[0] is None  # a goal's first plan samples from noise
+    assert warm[-1] is not None and warm[-1].shape == (9, 2)  # P^g - 1 waypoints
+    np.testing.assert_allclose(warm[-1][1:], xy[-8:], atol=1e-5)  # the rest of the plan
+    assert len(path_to_xy(r.plans[-1])) == 9 and tuple(path_to_xy(r.plans[-1])[-1]) == GOAL
+
+
 def test_same_seed_reproduces_the_plan(rig):
     paths = []
     for _ in range(2):
@@ -204,7 +221,8 @@ def test_same_seed_reproduces_the_plan(rig):
 
 
 @pytest.mark.parametrize("name,value", [("horizon", 1), ("num_candidates", 0),
-                                        ("selection", "random"), ("epsilon", -1.0)])
+                                        ("selection", "random"), ("epsilon", -1.0),
+                                        ("warm_fraction", 1.5)])
 def test_bad_parameters_are_named(name, value):
     values = {spec.name: spec.default for spec in PARAMETERS}  # the declared defaults
     values[name] = value
