@@ -86,6 +86,18 @@ def test_plan_ecahd_replan_policies_and_the_safety_net_record(tmp_path, replan):
     assert 0 <= r["exact_rule_segments"] <= len(r["waypoints"]) and "exact" in r["timings_ms"]
 
 
+def test_plan_ecahd_with_warm_started_replans(tmp_path, capsys):
+    rec = tmp_path / "p.json"
+    args = ["plan", "--method", "ecahd", "--robot", "humanoid", "--json", str(rec),
+            "--png", str(tmp_path / "p.png")]
+    assert main(args + ["--warm-fraction", "0.3"]) == 0
+    r = json.loads(rec.read_text())
+    assert r["warm_fraction"] == 0.3 and r["collision_free"] is True
+    assert np.allclose(r["trajectory"][-1], [10.5, 7.5], atol=1e-5)
+    assert main(args + ["--warm-fraction", "1.5"]) == 2
+    assert "warm_fraction" in capsys.readouterr().err
+
+
 def test_plan_sd_through_walls_is_repaired_by_the_fallback(tmp_path):
     # SD alone, its waypoints joined by straight lines, clips a wall near the start for the
     # circle robot (seed 0); the net splices A* in over that stretch

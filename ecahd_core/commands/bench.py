@@ -24,6 +24,7 @@ from ecahd_core.bench import contention as bench_contention
 from ecahd_core.bench import monitor as bench_monitor
 from ecahd_core.bench import replan as bench_replan
 from ecahd_core.bench.cost import CostBenchSettings
+from ecahd_core.commands.plan import add_replan_argument
 from ecahd_core.errors import EcahdError
 from ecahd_core.threads import add_precision_argument, add_threads_argument, set_torch_threads
 
@@ -204,11 +205,7 @@ def _add_planning_arguments(parser: argparse.ArgumentParser) -> None:
                         help="HD: keep a refined local plan the exact checker finds colliding "
                              "even where the straight or unpolished one is free (ours: put "
                              "that back)")
-    parser.add_argument("--replan", default=d.replan, choices=("every_waypoint", "once"),
-                        help="HD: SD best-of-N at every waypoint (Algorithm 1) or once")
-    parser.add_argument("--warm-fraction", type=float, default=d.warm_fraction, metavar="F",
-                        help="HD every_waypoint: warm-start each re-plan from the previous plan, "
-                             "running the last F (0..1) of the DDIM schedule (0: from noise)")
+    add_replan_argument(parser, d.replan, d.warm_fraction)
     add_precision_argument(parser, d.precision, "the SD Transformer's inference precision "
                                                 "(auto: bf16 where the CPU has native bfloat16)")
     parser.add_argument("--max-spacing", type=float, default=d.max_spacing, metavar="M",

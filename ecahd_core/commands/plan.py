@@ -37,13 +37,19 @@ DEFAULT_GOAL = (10.5, 7.5)
 SWEEP_SPACING = 0.25  # [m] between footprint outlines drawn along the path
 
 
-def add_replan_argument(p: argparse.ArgumentParser, default: str = "every_waypoint") -> None:
-    """``--replan``: HD / ECAHD's SD policy (HierarchicalPlanner's ``replan``), one definition
-    for ``ecahd plan`` and ``ecahd bench planning``."""
+def add_replan_argument(p: argparse.ArgumentParser, default: str = "every_waypoint",
+                        warm_fraction: float = 0.0) -> None:
+    """``--replan`` and ``--warm-fraction``: HD / ECAHD's SD policy (HierarchicalPlanner's
+    ``replan``, SparseConfig's ``warm_fraction``), one definition for ``ecahd plan`` and
+    ``ecahd bench planning``."""
     from ecahd_core.planner import REPLAN_POLICIES
 
     p.add_argument("--replan", default=default, choices=REPLAN_POLICIES,
                    help="HD: SD best-of-N at every waypoint (Algorithm 1) or once")
+    p.add_argument("--warm-fraction", type=float, default=warm_fraction, metavar="F",
+                   help="HD every_waypoint: warm-start each re-plan from the previous plan, "
+                        "running the last F (0..1) of the DDIM schedule (0: from noise, "
+                        "Algorithm 1 as written)")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -180,6 +186,7 @@ def run(args: argparse.Namespace) -> int:
             "penetration_fraction": float(report.penetration_fraction),
             "timings_ms": timings, "dd_calls": dd_calls, **counts,
             "replan": args.replan if args.method in ("ecahd", "hd") else None,
+            "warm_fraction": args.warm_fraction if args.method in ("ecahd", "hd") else None,
             "precision": (resolve_precision(args.precision)
                           if args.method in ("ecahd", "hd", "sd") else None),
             "safety_net": bool(args.safety_net), "rule": rule,
@@ -252,6 +259,7 @@ def _plan_diffusion(args, grid, footprint, start, goal):
                          SparseConfig(num_candidates=args.candidates, horizon=args.waypoints,
                                       selection=args.selection, max_spacing=args.max_spacing,
                                       guidance=(args.method == "sd" and guided),
+                                      warm_fraction=args.warm_fraction,
                                       precision=args.precision), cost=cost,
                          placer=placer_for(grid, footprint, args.place_reach))
     if args.method == "sd":
