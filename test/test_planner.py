@@ -13,13 +13,15 @@ from ecahd_core.planner import DenseConfig, HierarchicalPlanner, SparseConfig, S
 GRID = builtin_map("maze2d-large")
 
 
-def make_planner(c_th=0.1, enabled=True, robot="circle"):
+def make_planner(c_th=0.1, enabled=True, robot="circle", **kwargs):
+    """ECAHD on maze2d-large with SD best of 4; ``kwargs`` go to HierarchicalPlanner."""
     fp = make_footprint(robot)
     cc = CostConfig()
     sd = SparseDiffusion(load_model("sd", GRID, footprint=fp), SparseConfig(num_candidates=4))
     return HierarchicalPlanner(sd, load_model("dd", GRID, footprint=fp),
                                costmap=cc.make_costmap(GRID), footprint_points=fp.points,
-                               cost_config=cc, dense=DenseConfig(c_th=c_th, enabled=enabled))
+                               cost_config=cc, dense=DenseConfig(c_th=c_th, enabled=enabled),
+                               **kwargs)
 
 
 def test_algorithm1_reaches_goal_in_pg_iterations():
@@ -145,15 +147,10 @@ def _speck_checker(specks, radius):
 
 @pytest.mark.parametrize("replan", ["every_waypoint", "once"])
 def test_exact_rule_puts_back_a_free_plan_where_the_refined_one_collides(replan):
-    fp = make_footprint("circle")
-    cc = CostConfig()
-    sd = SparseDiffusion(load_model("sd", GRID, footprint=fp), SparseConfig(num_candidates=4))
     start, goal = np.array([1.5, 1.5]), np.array([10.5, 7.5])
 
     def plan_with(check):
-        hd = HierarchicalPlanner(sd, load_model("dd", GRID, footprint=fp),
-                                 costmap=cc.make_costmap(GRID), footprint_points=fp.points,
-                                 cost_config=cc, replan=replan, exact_check=check)
+        hd = make_planner(replan=replan, exact_check=check)
         return hd.plan(start, goal, generator=torch.Generator().manual_seed(0))
 
     base = plan_with(None)
