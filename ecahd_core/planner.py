@@ -467,7 +467,7 @@ class LocalStages:
     dd_used: torch.Tensor
     polished: torch.Tensor
     timings_ms: dict
-    exact_kept: torch.Tensor | None = None
+    exact_kept: torch.Tensor
 
 
 REPLAN_POLICIES = ("every_waypoint", "once")
@@ -492,8 +492,8 @@ class HierarchicalPlanner:
             replanned distribution is the same, so this trades resampling for ~P^g times less SD
             work).
         exact_check: the exact rule (ours; None: off, the paper's). A function of a path
-            (N, 2) [m] float64 giving (N - 1,) bool, its segments that collide, e.g.
-            ``functools.partial(collision.segment_collisions, footprint=fp, grid=grid)``.
+            (N, 2) [m] float64 giving (N - 1,) bool, its segments that collide:
+            ``collision.exact_check_for(grid, footprint)``.
             J (with its margin) only triggers DD and polishing; when the exact checker finds a
             refined local plan in collision, the unpolished DD plan or else the straight one
             is put back where the checker finds it free (its points then stay fixed while the
@@ -665,7 +665,7 @@ class HierarchicalPlanner:
         end (where ``end_fixed[-1]``) and the points of the ``frozen`` (K,) segments fixed, and
         split it again -> (plans (K, P^l, 2), moved (K,) bool)."""
         K, P_l = local.shape[:2]
-        path = torch.cat([local[:1, 0], local[:, 1:].reshape(-1, 2)])[None]
+        path = self._join(local)[None]
         fixed = torch.zeros(path.shape[1], dtype=torch.bool)
         fixed[0], fixed[-1] = True, bool(end_fixed[-1])
         idx = torch.arange(K)[:, None] * (P_l - 1) + torch.arange(P_l)[None]  # (K, P^l)
@@ -675,12 +675,17 @@ class HierarchicalPlanner:
         new = path[0][idx]
         return new, (new - local).abs().amax(dim=(1, 2)) > 0
 
+    @staticmethod
+    def _join(plans: torch.Tensor) -> torch.Tensor:
+        """K consecutive local plans (K, P^l, 2) -> the path through them (K (P^l - 1) + 1, 2)."""
+        return torch.cat([plans[:1, 0], plans[:, 1:].reshape(-1, 2)])
+
     def _colliding(self, plans: torch.Tensor, joined: bool) -> torch.Tensor:
         """The exact checker's verdict on K local plans (K, P^l, 2) -> (K,) bool (collides);
         consecutive (``joined``) plans are checked as one path."""
         K, P_l = plans.shape[:2]
         if joined:
-            path = torch.cat([plans[:1, 0], plans[:, 1:].reshape(-1, 2)]).double().numpy()
+            path = self._join(plans).double().numpy()
             bad = np.asarray(self.exact_check(path), dtype=bool).reshape(K, P_l - 1)
             return torch.as_tensor(bad.any(axis=1))
         return torch.tensor([bool(np.any(self.exact_check(p.double().numpy()))) for p in plans],

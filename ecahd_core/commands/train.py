@@ -215,9 +215,14 @@ def run_all(args: argparse.Namespace) -> int:
     # an ETA from the start: each model's step time measured now, the dataset has its own bar
     per_step = {k: seconds_per_step(k, grid, device=args.device, precision=precision)
                 for k in args.kinds}
+
+    def sized(scale: float) -> tuple[dict, dict]:
+        """Each kind's steps at ``scale`` x its recipe's, and their estimated time [s]."""
+        steps = {k: max(1, int(round(recipe(k).steps * scale))) for k in args.kinds}
+        return steps, {k: steps[k] * per_step[k] for k in args.kinds}
+
     scale = args.steps_scale
-    steps = {k: max(1, int(round(recipe(k).steps * scale))) for k in args.kinds}
-    estimate = {k: steps[k] * per_step[k] for k in args.kinds}
+    steps, estimate = sized(scale)
     train_s = sum(estimate.values())
     plan = (f"training until ~{_clock(args.minutes * 60)} ({args.minutes:g} min from now), its "
             f"steps set once the dataset is made" if args.minutes is not None else
@@ -233,10 +238,8 @@ def run_all(args: argparse.Namespace) -> int:
     dataset.save(data_path)
     times = {"dataset": time.perf_counter() - t_start}
     if args.minutes is not None:
-        scale = budget_scale(args.minutes * 60 - times["dataset"],
-                             {k: recipe(k).steps * per_step[k] for k in args.kinds})
-        steps = {k: max(1, int(round(recipe(k).steps * scale))) for k in args.kinds}
-        estimate = {k: steps[k] * per_step[k] for k in args.kinds}
+        scale = budget_scale(args.minutes * 60 - times["dataset"], sized(1.0)[1])
+        steps, estimate = sized(scale)
         train_s = sum(estimate.values())
         if scale < 0.5:
             log.warning("the %g min budget leaves the models %.0f%% of their recipes' steps: "
