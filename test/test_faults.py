@@ -355,10 +355,15 @@ def wait_for(condition, what: str, timeout: float = 10.0) -> None:
 
 
 class Logs:
-    """The error lines each node wrote to stderr (rcutils logs there), read through capfd."""
+    """The error lines each node wrote to stderr (rcutils logs there), read through capfd.
+
+    Lines passed to :meth:`settle` are answers already counted: the same text again later (a
+    reliable sample that DDS re-sent after its heartbeat, seconds late, and the node answered
+    twice) is not counted against the next message."""
 
     def __init__(self, capfd) -> None:
         self.capfd, self.text = capfd, ""
+        self.settled: set[str] = set()
 
     def read(self) -> str:
         captured = self.capfd.readouterr()
@@ -368,9 +373,17 @@ class Logs:
     def mark(self) -> int:
         return len(self.read())
 
+    @staticmethod
+    def _text(line: str) -> str:
+        return line.split("] ", 2)[-1]  # without "[ERROR] [stamp] "
+
     def errors(self, node: str, since: int) -> list[str]:
         return [line for line in self.read()[since:].splitlines()
-                if line.startswith("[ERROR]") and f"[{node}]" in line]
+                if line.startswith("[ERROR]") and f"[{node}]" in line
+                and self._text(line) not in self.settled]
+
+    def settle(self, lines: list[str]) -> None:
+        self.settled.update(self._text(line) for line in lines)
 
 
 def odom_msg(x=1.5, y=Y, qz=0.0, qw=1.0, frame="map") -> Odometry:
@@ -660,6 +673,7 @@ def test_malformed_input_to_planner_and_refiner(ros_context, capfd, tmp_path):
             for n, (lo, hi) in nodes.items():
                 lines = logs.errors(n, mark)
                 assert lo <= len(lines) <= hi * sent, (topic, what, n, lines)
+                logs.settle(lines)
 
     try:
         publish("map", map_msg())
