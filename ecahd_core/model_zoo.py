@@ -143,38 +143,6 @@ def training_arrays(kind: str, dataset) -> dict[int, np.ndarray]:
     raise CheckpointError(f"unknown model kind {kind!r}; allowed: {list(KINDS)}")
 
 
-# the clearance field an SD with local map features reads (``--map-field``, ours): cells of at
-# most FIELD_CELL [m], the distance to the nearest obstacle clipped at FIELD_CLIP [m]
-FIELD_CELL = 0.1
-FIELD_CLIP = 1.0
-
-
-def clearance_field(grid, *, cell: float = FIELD_CELL, clip: float = FIELD_CLIP) -> np.ndarray:
-    """The map as a denoiser with ``map_field_shape`` reads it: (H', W') float32 in [0, 1], the
-    distance [m] from each cell to the nearest occupied (or, on a map that counts them so,
-    unknown) cell clipped at ``clip`` and divided by it, on cells of about ``cell`` m (the
-    grid's own where it is coarser) covering exactly ``grid.bounds``; row 0 at the lowest y."""
-    import cv2
-
-    dist = np.minimum(grid.free_distance, clip) / clip
-    H, W = dist.shape
-    k = cell / grid.resolution
-    if k <= 1.0:
-        return dist.astype(np.float32)
-    size = (max(1, int(round(W / k))), max(1, int(round(H / k))))
-    return cv2.resize(dist.astype(np.float32), size, interpolation=cv2.INTER_AREA)
-
-
-def field_config(config, grid, normalizer):
-    """``config`` (a DenoiserConfig) with the local map features of :func:`clearance_field`
-    for ``grid``: (that config, the field)."""
-    import dataclasses
-
-    field = clearance_field(grid)
-    return dataclasses.replace(config, map_field_shape=field.shape,
-                               map_field_reach=tuple(1.0 / s for s in normalizer.scale)), field
-
-
 def model_meta(kind: str, dataset) -> dict[str, Any]:
     """Identity recorded in a checkpoint and checked when it is loaded (plus the DDIM step
     count to sample it with)."""

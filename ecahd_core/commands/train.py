@@ -34,10 +34,6 @@ def _add_common(p: argparse.ArgumentParser) -> None:
                                       "natively (AVX512-BF16 / AMX CPUs, recent GPUs), fp32 "
                                       "elsewhere")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--map-field", action="store_true",
-                   help="SD with local map features (ours, beyond the paper): each waypoint "
-                        "token also reads the training map's clearance around it and along its "
-                        "leg to the next waypoint (a field of 0.1 m cells stored in the model)")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -82,11 +78,10 @@ def add_all_arguments(p: argparse.ArgumentParser) -> None:
 def train_one(kind: str, dataset, *, out: Path, seed: int, device: str, steps: int | None = None,
               batch_size: int | None = None, warmup: int | None = None,
               steps_scale: float = 1.0, resume: str | None = None, ship: Path | None = None,
-              progress: bool = True, precision: str = "fp32", map_field: bool = False):
-    """Train one model kind on an ExpertDataset; returns the TrainResult. ``map_field``: SD
-    with local map features (``model_zoo.field_config``; ours)."""
+              progress: bool = True, precision: str = "fp32"):
+    """Train one model kind on an ExpertDataset; returns the TrainResult."""
     from ecahd_core.diffusion import Normalizer, TrainConfig, train
-    from ecahd_core.model_zoo import field_config, model_meta, recipe, training_arrays
+    from ecahd_core.model_zoo import model_meta, recipe, training_arrays
 
     r = recipe(kind)
     arrays = training_arrays(kind, dataset)
@@ -97,21 +92,12 @@ def train_one(kind: str, dataset, *, out: Path, seed: int, device: str, steps: i
                      warmup_steps=warmup,
                      lr=r.lr, ema_decay=r.ema_decay, seed=seed, device=device,
                      log_every=max(1, min(100, steps // 20)), precision=precision)
-    grid = dataset.grid()
-    normalizer = Normalizer.from_bounds(*grid.bounds)
-    field = None
-    if map_field:
-        if kind != "sd":
-            raise EcahdError(f"local map features are an SD option, not {kind.upper()}'s")
-        config, field = field_config(config, grid, normalizer)
+    normalizer = Normalizer.from_bounds(*dataset.grid().bounds)
     n = sum(len(a) for a in arrays.values())
-    log.info("training %s: %d trajectories, horizons %s, %d steps x batch %d on %s (%s%s)",
-             kind, n, sorted(arrays), tc.steps, tc.batch_size, device, precision,
-             f", local map features on a {field.shape[1]} x {field.shape[0]} field"
-             if field is not None else "")
+    log.info("training %s: %d trajectories, horizons %s, %d steps x batch %d on %s (%s)",
+             kind, n, sorted(arrays), tc.steps, tc.batch_size, device, precision)
     result = train(config, arrays, normalizer, tc, kind=kind, out_path=out,
-                   meta=model_meta(kind, dataset), resume_from=resume, progress=progress,
-                   map_field=field)
+                   meta=model_meta(kind, dataset), resume_from=resume, progress=progress)
     if ship is not None and result.checkpoint is not None:
         result.checkpoint.save(ship, include_training_state=False)
         log.info("inference-only model: %s (%.1f MB)", ship, ship.stat().st_size / 1e6)
@@ -126,7 +112,7 @@ ESTIMATE_HORIZONS = {"sd": tuple(range(2, 11)), "dd": (4,), "fd": (100,)}
 
 
 def seconds_per_step(kind: str, grid, *, device: str = "cpu", probe: int = 8,
-                     precision: str = "fp32", map_field: bool = False) -> float:
+                     precision: str = "fp32") -> float:
     """[s] one optimiser step of ``kind``'s recipe on this machine, measured on synthetic
     trajectories of the learnt horizons (a step's cost does not depend on the values): short
     runs of :func:`~ecahd_core.diffusion.train` (a warm-up, then 1 and 1 + ``probe`` steps; the
@@ -145,11 +131,6 @@ def seconds_per_step(kind: str, grid, *, device: str = "cpu", probe: int = 8,
               for h in ESTIMATE_HORIZONS[kind]}
     config = r.denoiser_config(max(arrays))
     normalizer = Normalizer.from_bounds(*grid.bounds)
-    field = None
-    if map_field:
-        from ecahd_core.model_zoo import field_config
-
-        config, field = field_config(config, grid, normalizer)
     times = []
     quiet = logging.getLogger("ecahd_core.diffusion.training")
     level = quiet.level
@@ -161,7 +142,7 @@ def seconds_per_step(kind: str, grid, *, device: str = "cpu", probe: int = 8,
                              precision=precision)
             t0 = time.perf_counter()
             train(config, arrays, normalizer, tc, kind=kind, out_path=Path(tmp) / "probe.pt",
-                  progress=False, map_field=field)
+                  progress=False)
             times.append(time.perf_counter() - t0)
     quiet.setLevel(level)
     return max(0.0, (times[2] - times[1]) / probe)
@@ -183,8 +164,7 @@ def run(args: argparse.Namespace) -> int:
                        steps=args.steps, batch_size=args.batch_size, warmup=args.warmup,
                        steps_scale=args.steps_scale, resume=args.resume,
                        ship=Path(args.ship) if args.ship else None,
-                       progress=not args.no_progress, precision=precision,
-                       map_field=args.map_field)
+                       progress=not args.no_progress, precision=precision)
     last = result.loss_history[-1][1] if result.loss_history else float("nan")
     print(f"trained {args.kind}: {result.step} steps in {time.perf_counter() - t0:.0f} s, "
           f"final loss {last:.4f} -> {result.path}")
@@ -233,8 +213,7 @@ def run_all(args: argparse.Namespace) -> int:
         raise EcahdError(f"--minutes must be > 0 and replaces --steps-scale, got --minutes "
                          f"{args.minutes} with --steps-scale {args.steps_scale}")
     # an ETA from the start: each model's step time measured now, the dataset has its own bar
-    per_step = {k: seconds_per_step(k, grid, device=args.device, precision=precision,
-                                    map_field=args.map_field and k == "sd")
+    per_step = {k: seconds_per_step(k, grid, device=args.device, precision=precision)
                 for k in args.kinds}
 
     def sized(scale: float) -> tuple[dict, dict]:
@@ -276,7 +255,7 @@ def run_all(args: argparse.Namespace) -> int:
         ship = out_dir / shipped_path(grid.name, kind).name
         result = train_one(kind, dataset, out=work / f"{grid.name}_{kind}.pt", seed=args.seed,
                            device=args.device, steps_scale=scale, ship=ship,
-                           precision=precision, map_field=args.map_field and kind == "sd",
+                           precision=precision,
                            progress=not args.no_progress)
         times[kind] = time.perf_counter() - t0
         last = result.loss_history[-1][1] if result.loss_history else float("nan")

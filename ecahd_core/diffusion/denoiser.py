@@ -11,9 +11,7 @@ Transformer tokens (B, 1 [+1] + P, d_model):
     [map]       optional (``use_map_encoder``): a small ResNet's pooled feature of a (B, 1, H, W)
                 occupancy image (the paper's "shallow CNN (ResNet-18)", scaled down).
     [waypoints] Linear(2 -> d_model) of each normalised point + a learned position embedding
-                (rows 0..max_horizon-1); with ``map_field_shape`` (ours, beyond the paper) also
-                Linear(LOCAL_FEATURES -> d_model) of the map around the point and along its leg
-                to the next one (:meth:`TransformerDenoiser.local_features`).
+                (rows 0..max_horizon-1).
 Encoder: ``nn.TransformerEncoder`` (batch_first, pre-norm, GELU, no attention mask: every token
 sees every other), final LayerNorm, Linear(d_model -> 2) on the waypoint tokens.
 
@@ -82,13 +80,6 @@ class DenoiserConfig:
         ff_mult: feed-forward width = ff_mult * d_model (transformer).
         dropout: dropout inside the encoder layers, training only (transformer).
         use_map_encoder: add a map token from a (B, 1, H, W) occupancy image (transformer).
-        map_field_shape: (H, W) of a clearance field of the training map stored in the model
-            (buffer ``map_field``, set by :meth:`TransformerDenoiser.set_map_field`); each
-            waypoint token then also sees the field read at and around its noisy position and
-            along its leg to the next waypoint (ours, beyond the paper; transformer only).
-            None: off, the paper's SD, which knows its map only through its weights.
-        map_field_reach: (2,) [normalised units] the ring radius of 1 m in the diffusion space
-            per axis (1 / the normaliser's scale), with ``map_field_shape``.
         unet_channels: channels of each U-Net level, finest first; P is halved between levels
             (temporal_unet). The first is also the time-embedding width.
         unet_kernel_size: odd temporal kernel of the U-Net convolutions (temporal_unet).
@@ -106,8 +97,6 @@ class DenoiserConfig:
     ff_mult: int = 4
     dropout: float = 0.0
     use_map_encoder: bool = False
-    map_field_shape: tuple[int, int] | None = None
-    map_field_reach: tuple[float, float] | None = None
     unet_channels: tuple[int, ...] = (32, 64, 128)
     unet_kernel_size: int = 5
     prediction: str = "epsilon"
@@ -140,45 +129,15 @@ class DenoiserConfig:
         if self.architecture == "temporal_unet" and self.use_map_encoder:
             raise ValueError("DenoiserConfig.use_map_encoder is only supported by the "
                              "'transformer' architecture")
-        if (self.map_field_shape is None) != (self.map_field_reach is None):
-            raise ValueError("DenoiserConfig.map_field_shape and map_field_reach go together")
-        if self.map_field_shape is not None:
-            if self.architecture != "transformer":
-                raise ValueError("DenoiserConfig.map_field_shape is only supported by the "
-                                 "'transformer' architecture")
-            shape = tuple(_positive_int("DenoiserConfig.map_field_shape", v)
-                          for v in self.map_field_shape)
-            reach = tuple(float(v) for v in self.map_field_reach)
-            if len(shape) != 2 or len(reach) != 2 or not all(math.isfinite(r) and r > 0
-                                                             for r in reach):
-                raise ValueError(f"DenoiserConfig.map_field_shape must be (H, W) and "
-                                 f"map_field_reach two positive numbers, got "
-                                 f"{self.map_field_shape}, {self.map_field_reach}")
-            object.__setattr__(self, "map_field_shape", shape)
-            object.__setattr__(self, "map_field_reach", reach)
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
         d["unet_channels"] = list(self.unet_channels)
-        for name in ("map_field_shape", "map_field_reach"):
-            if d[name] is None:
-                del d[name]  # checkpoints without the field stay as they were
-            else:
-                d[name] = list(d[name])
         return d
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "DenoiserConfig":
         return cls(**d)
-
-
-# the local map features of a waypoint token (TransformerDenoiser.local_features): the field at
-# the point, on rings of RING_RADII [m] in RING_DIRECTIONS directions, and at LEG_SAMPLES
-# points evenly inside the straight leg to the next waypoint (zeros for the last one)
-RING_RADII = (0.5, 1.0)
-RING_DIRECTIONS = 8
-LEG_SAMPLES = 8
-LOCAL_FEATURES = 1 + len(RING_RADII) * RING_DIRECTIONS + LEG_SAMPLES
 
 
 def _positive_int(name: str, value: Any) -> int:
@@ -272,18 +231,6 @@ class TransformerDenoiser(nn.Module):
         self.horizon_embed = nn.Embedding(config.max_horizon + 1, d)
         self.time_mlp = nn.Sequential(nn.Linear(d, d * 2), nn.GELU(), nn.Linear(d * 2, d))
         self.map_encoder = MapEncoder(d) if config.use_map_encoder else None
-        self.local_embed = None
-        if config.map_field_shape is not None:
-            self.register_buffer("map_field", torch.zeros(1, 1, *config.map_field_shape))
-            angles = torch.arange(RING_DIRECTIONS, dtype=torch.float32) \
-                * (2 * math.pi / RING_DIRECTIONS)
-            unit = torch.stack([torch.cos(angles), torch.sin(angles)], dim=-1)  # (D, 2)
-            ring = torch.cat([torch.zeros(1, 2)] + [unit * r for r in RING_RADII])  # (R, 2) m
-            reach = torch.tensor(config.map_field_reach, dtype=torch.float32)
-            self.register_buffer("ring_offsets", ring * reach, persistent=False)
-            self.register_buffer("leg_fractions", torch.arange(
-                1, LEG_SAMPLES + 1, dtype=torch.float32) / (LEG_SAMPLES + 1), persistent=False)
-            self.local_embed = nn.Linear(LOCAL_FEATURES, d)
         layer = nn.TransformerEncoderLayer(
             d_model=d, nhead=config.n_heads, dim_feedforward=config.ff_mult * d,
             dropout=config.dropout, activation="gelu", batch_first=True, norm_first=True)
@@ -296,37 +243,6 @@ class TransformerDenoiser(nn.Module):
     @property
     def num_prefix_tokens(self) -> int:
         return 2 if self.map_encoder is not None else 1
-
-    def set_map_field(self, field) -> None:
-        """Store the training map's clearance field: (H, W) = ``config.map_field_shape``, values
-        in [0, 1] (0 in an obstacle or off the map), row 0 at the map's lowest y and column 0 at
-        its lowest x, covering exactly the normaliser's [-1, 1]^2
-        (``model_zoo.clearance_field``)."""
-        if self.local_embed is None:
-            raise ValueError("this denoiser was built without map_field_shape")
-        field = torch.as_tensor(field, dtype=torch.float32)
-        if tuple(field.shape) != self.config.map_field_shape:
-            raise ValueError(f"map field must have shape {self.config.map_field_shape}, "
-                             f"got {tuple(field.shape)}")
-        with torch.no_grad():
-            self.map_field.copy_(field.reshape(self.map_field.shape))
-
-    def local_features(self, x: Tensor) -> Tensor:
-        """The map around each waypoint: (B, P, 2) normalised points -> (B, P, LOCAL_FEATURES),
-        the field read bilinearly (0 off the map) at the point, on its rings and inside its
-        leg to the next point (0 for the last point)."""
-        B, P, _ = x.shape
-        ring = x[:, :, None] + self.ring_offsets.to(x.dtype)  # (B, P, R, 2)
-        nxt = torch.cat([x[:, 1:], x[:, -1:]], dim=1)
-        f = self.leg_fractions.to(x.dtype)[None, None, :, None]
-        leg = x[:, :, None] + (nxt - x)[:, :, None] * f  # (B, P, L, 2)
-        points = torch.cat([ring, leg], dim=2).reshape(1, B * P, -1, 2)
-        values = nn.functional.grid_sample(
-            self.map_field.to(x.dtype), points, mode="bilinear", padding_mode="zeros",
-            align_corners=False).reshape(B, P, -1)
-        last = torch.ones(P, values.shape[-1], dtype=x.dtype, device=x.device)
-        last[-1, ring.shape[2]:] = 0.0  # the last point has no leg
-        return values * last
 
     def encode_map(self, image: Tensor) -> Tensor:
         """(B, 1, H, W) occupancy image -> (B, d_model) map feature (compute once per plan and
@@ -350,8 +266,6 @@ class TransformerDenoiser(nn.Module):
         t = _check_inputs(x, t, self.config.max_horizon)
         B, P, _ = x.shape
         tokens = self.point_embed(x) + self.pos_embed[:, :P]  # (B, P, d)
-        if self.local_embed is not None:
-            tokens = tokens + self.local_embed(self.local_features(x))
         horizon = torch.full((B,), P, dtype=torch.long, device=x.device)
         cond = self.time_mlp(sinusoidal_embedding(t, self.config.d_model)) \
             + self.horizon_embed(horizon)  # (B, d)

@@ -426,8 +426,7 @@ def _ema_update(ema: nn.Module, model: nn.Module, decay: float) -> None:
 def train(model_config: DenoiserConfig, arrays: Mapping[int, Any], normalizer: Normalizer,
           train_config: TrainConfig, *, kind: str, out_path: str | os.PathLike,
           meta: Mapping[str, Any] | None = None, resume_from: str | os.PathLike | None = None,
-          progress: bool = True, map_image: Any | None = None,
-          map_field: Any | None = None) -> TrainResult:
+          progress: bool = True, map_image: Any | None = None) -> TrainResult:
     """Train a denoiser and write its checkpoint.
 
     Args:
@@ -444,8 +443,6 @@ def train(model_config: DenoiserConfig, arrays: Mapping[int, Any], normalizer: N
         progress: show a tqdm bar (rank 0).
         map_image: (H, W) occupancy in [0, 1] shared by all samples; required exactly when
             ``model_config.use_map_encoder``.
-        map_field: (H, W) = ``model_config.map_field_shape`` clearance field stored in the
-            model (``model_zoo.clearance_field``); required exactly with that shape.
     Returns:
         :class:`TrainResult`.
     """
@@ -458,8 +455,7 @@ def train(model_config: DenoiserConfig, arrays: Mapping[int, Any], normalizer: N
     try:
         return _train(model_config, arrays, normalizer, train_config, kind=kind,
                       out_path=Path(out_path), meta=meta, resume_from=resume_from,
-                      progress=progress, map_image=map_image, map_field=map_field,
-                      device=device, dist_info=dist_info)
+                      progress=progress, map_image=map_image, device=device, dist_info=dist_info)
     finally:
         if dist_info.owns_group:
             dist.destroy_process_group()
@@ -468,7 +464,7 @@ def train(model_config: DenoiserConfig, arrays: Mapping[int, Any], normalizer: N
 def _train(model_config: DenoiserConfig, arrays: Mapping[int, Any], normalizer: Normalizer,
            cfg: TrainConfig, *, kind: str, out_path: Path, meta: dict[str, Any],
            resume_from: str | os.PathLike | None, progress: bool, map_image: Any | None,
-           map_field: Any | None, device: torch.device, dist_info: _DistInfo) -> TrainResult:
+           device: torch.device, dist_info: _DistInfo) -> TrainResult:
     rank, world = dist_info.rank, dist_info.world_size
     if cfg.batch_size % world:
         raise ValueError(f"batch_size {cfg.batch_size} is not divisible by {world} ranks")
@@ -496,14 +492,9 @@ def _train(model_config: DenoiserConfig, arrays: Mapping[int, Any], normalizer: 
         image = torch.as_tensor(np.asarray(map_image), dtype=torch.float32, device=device)
         model_kwargs["map_image"] = image.reshape(1, 1, *image.shape[-2:])
 
-    if (model_config.map_field_shape is None) != (map_field is None):
-        raise ValueError("pass map_field exactly when model_config.map_field_shape is set")
     with torch.random.fork_rng(devices=[]):  # seeded initial weights; caller's RNG untouched
         torch.manual_seed(cfg.seed)
-        model = build_denoiser(model_config)
-        if map_field is not None:
-            model.set_map_field(map_field)
-        model = model.to(device)
+        model = build_denoiser(model_config).to(device)
     ema = copy.deepcopy(model).eval().requires_grad_(False)
     schedule = NoiseSchedule(cfg.schedule).to(device)
     K = schedule.num_train_timesteps
