@@ -10,11 +10,16 @@ still finds the plan in collision, the net acts in this order and reports which 
    at most ``retries`` rounds; the shortest candidate the checker finds free replaces the segment
    (its end points stay, so neighbouring segments stay joined). Needs the HierarchicalPlanner
    and the plan's local segments; skipped otherwise (SD, FD, ECAHD w/o DD).
-2. ``fallback``: A* with the footprint's clearance (``astar.clearance_for_footprint``) for each
+2. ``resample``: "more candidates first" for a route DD cannot bend: the whole plan is drawn
+   again by the planner (SD's best of N and the local stage, fresh samples), up to ``resamples``
+   times; the first plan the checker finds free is returned. A leg of SD's plan across a wall
+   or shelf is what DD cannot repair, and another draw of SD often puts its waypoints on the
+   right side. Needs the HierarchicalPlanner; skipped otherwise.
+3. ``fallback``: A* with the footprint's clearance (``astar.clearance_for_footprint``) for each
    offending stretch only, from the last point before the collision that keeps that clearance
    to the first such point after it, spliced in (logged at WARNING). A stretch the checker still
    finds in collision is widened by one point on each side and planned again.
-3. ``unsafe``: no A* path either (or the fallback is off): the result says so, with the reason;
+4. ``unsafe``: no A* path either (or the fallback is off): the result says so, with the reason;
    callers must not follow it (``ecahd plan`` exits 2).
 
 ``none``: the plan was collision-free as it came and is returned untouched.
@@ -37,7 +42,7 @@ from ecahd_core.maps import GridMap
 
 log = logging.getLogger(__name__)
 
-SAFETY_RULES = ("none", "retry", "fallback", "unsafe")
+SAFETY_RULES = ("none", "retry", "resample", "fallback", "unsafe")
 FALLBACKS = ("astar", "none")
 
 
@@ -49,6 +54,7 @@ class SafetyNetConfig:
         retries: rounds of fresh Dense Diffusion samples for the colliding local segments
             (rule 1); 0 skips the rule.
         samples: DD candidates per colliding segment and round (one batch).
+        resamples: whole plans drawn again (rule 2) before the fallback; 0 skips the rule.
         fallback: "astar" (rule 2: A* with the footprint's clearance for the offending
             stretches) or "none" (a plan still colliding after rule 1 is unsafe).
         padding: [m] added to the footprint's circumscribed radius for the fallback's A*.
@@ -59,6 +65,7 @@ class SafetyNetConfig:
 
     retries: int = 2
     samples: int = 8
+    resamples: int = 2
     fallback: str = "astar"
     padding: float = 0.0
     max_widen: int = 4
@@ -68,9 +75,10 @@ class SafetyNetConfig:
         if self.fallback not in FALLBACKS:
             raise EcahdError(f"safety-net fallback {self.fallback!r} is not one of "
                              f"{list(FALLBACKS)}")
-        if self.retries < 0 or self.samples < 1 or self.max_widen < 0:
-            raise EcahdError(f"safety net needs retries >= 0, samples >= 1 and max_widen >= 0, "
-                             f"got {self.retries}, {self.samples}, {self.max_widen}")
+        if self.retries < 0 or self.samples < 1 or self.max_widen < 0 or self.resamples < 0:
+            raise EcahdError(f"safety net needs retries >= 0, samples >= 1, resamples >= 0 and "
+                             f"max_widen >= 0, got {self.retries}, {self.samples}, "
+                             f"{self.resamples}, {self.max_widen}")
         if not (math.isfinite(self.padding) and self.padding >= 0):
             raise EcahdError(f"safety-net padding must be a finite number >= 0 m, "
                              f"got {self.padding!r}")
@@ -87,6 +95,7 @@ class SafePlan:
         collided_before: the exact checker found the input plan in collision.
         stretches: (first, last) indices into ``path`` (inclusive) of each A* stretch spliced in.
         retried_segments: local segments replaced by rule 1.
+        resampled: whole plans drawn by rule 2.
         reason: why the plan is unsafe ("" otherwise).
         time_ms: wall time of the net (checks included).
     """
@@ -96,6 +105,7 @@ class SafePlan:
     collided_before: bool
     stretches: tuple = ()
     retried_segments: int = 0
+    resampled: int = 0
     reason: str = ""
     time_ms: float = 0.0
 
@@ -166,7 +176,7 @@ class SafetyNet:
             plan_path: (N, 2) [m] the plan (e.g. ``HierarchicalPlan.trajectory``).
             segments: the plan's local segments, each (P^l, 2) [m], joined end to start into
                 ``plan_path`` (``HierarchicalPlan.segments``); needed by rule 1.
-            generator: torch.Generator for rule 1's DD samples.
+            generator: torch.Generator for the samples of rules 1 and 2.
 
         Returns:
             SafePlan; ``rule`` says which rule acted ("unsafe": do not follow ``path``).
@@ -177,15 +187,18 @@ class SafetyNet:
             raise EcahdError(f"the safety net needs a (N, 2) path, got shape {path.shape}")
         report = self.check(path)
 
+        resampled = 0
+
         def done(rule, p, *, stretches=(), retried=0, reason=""):
             return SafePlan(path=p, rule=rule, collided_before=not report.collision_free,
-                            stretches=tuple(stretches), retried_segments=retried, reason=reason,
+                            stretches=tuple(stretches), retried_segments=retried,
+                            resampled=resampled, reason=reason,
                             time_ms=(time.perf_counter() - t0) * 1e3)
 
         if report.collision_free:
             return done("none", path)
         retried = 0
-        if self.config.retries and segments is not None and self._can_retry():
+        if self.config.retries and segments is not None and self._can_replan():
             segs = [np.array(s, dtype=np.float64) for s in segments]
             retried = self._retry(segs, generator)
             if retried:
@@ -194,6 +207,14 @@ class SafetyNet:
                     log.info("safety net: %d local segment(s) sampled again by DD, now "
                              "collision-free", retried)
                     return done("retry", path, retried=retried)
+        if self.config.resamples and self._can_replan():
+            for resampled in range(1, self.config.resamples + 1):
+                again = np.array(self.planner.plan(path[0], path[-1], generator=generator
+                                                   ).trajectory, dtype=np.float64)
+                if self.check(again).collision_free:
+                    log.info("safety net: plan drawn again (%d of at most %d), now "
+                             "collision-free", resampled, self.config.resamples)
+                    return done("resample", again, retried=retried)
         if self.config.fallback == "none":
             return done("unsafe", path, retried=retried,
                         reason="the plan collides and the A* fallback is off")
@@ -206,7 +227,7 @@ class SafetyNet:
         return done("fallback", work.path, stretches=work.stretches, retried=retried)
 
     # ---------------------------------------------------------------------- rule 1: retries
-    def _can_retry(self) -> bool:
+    def _can_replan(self) -> bool:
         return self.planner is not None and getattr(self.planner, "dd", None) is not None
 
     def _retry(self, segs: list[np.ndarray], generator) -> int:

@@ -67,8 +67,11 @@ def test_safety_net_is_reported_beside_hd_and_leaves_its_numbers_alone():
         assert b["net_collision_free"] >= b["collision_free"]
         assert b["net_time_ms_mean"] >= b["time_ms_mean"]
         assert 0 <= b["net_fallback_rate"] <= 100 and 0 <= b["net_retry_rate"] <= 100
+        assert 0 <= b["net_resample_rate"] <= 100
+        assert b["net_retry_rate"] + b["net_resample_rate"] + b["net_fallback_rate"] \
+            + b["net_unsafe_rate"] == pytest.approx(100.0 - b["collision_free"])
     text = format_markdown(runs[True])
-    assert "safety net" in text and "fallback %" in text
+    assert "safety net" in text and "resample %" in text and "fallback %" in text
     assert "safety net" not in format_markdown(runs[False])
 
 

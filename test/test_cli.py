@@ -78,7 +78,9 @@ def test_plan_ecahd_replan_policies_and_the_safety_net_record(tmp_path, replan):
                  "--json", str(rec), "--png", str(tmp_path / "p.png")]) == 0
     r = json.loads(rec.read_text())
     assert r["replan"] == replan and r["safety_net"] is True
-    assert r["rule"] in ("none", "retry", "fallback")
+    assert r["rule"] in ("none", "retry", "resample", "fallback")
+    # plans are drawn again only after the retries failed, and the first free one is kept
+    assert (r["resampled_plans"] > 0) == (r["rule"] in ("resample", "fallback"))
     assert r["collision_free"] is True  # the net never hands out a colliding plan
     assert isinstance(r["collision_free_before_net"], bool)
     assert r["collision_free_before_net"] == (r["rule"] == "none")

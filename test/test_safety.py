@@ -84,13 +84,24 @@ def test_fallback_off_makes_a_colliding_plan_unsafe():
 
 
 class DetourPlanner:
-    """A stand-in for HierarchicalPlanner's retry hook: its "DD" returns one straight candidate
-    (still through the wall) and one that detours over the wall's top at y = 3.4."""
+    """A stand-in for HierarchicalPlanner's hooks: its "DD" returns one straight candidate
+    (still through the wall) and one that detours over the wall's top at y = 3.4; its whole
+    plans (``plan``) go straight through the wall the first ``bad_plans`` times, then over the
+    top."""
 
     dd = object()
 
-    def __init__(self):
-        self.calls = 0
+    def __init__(self, bad_plans: int = 10 ** 6):
+        self.calls, self.plans, self.bad_plans = 0, 0, bad_plans
+
+    def plan(self, start, goal, *, generator=None):
+        from types import SimpleNamespace
+
+        self.plans += 1
+        if self.plans <= self.bad_plans:
+            return SimpleNamespace(trajectory=line(start, goal))
+        return SimpleNamespace(trajectory=np.array(
+            [start, [start[0], 3.4], [goal[0], 3.4], goal], dtype=np.float64))
 
     def resample_segment(self, a, b, *, samples, generator=None):
         self.calls += 1
@@ -110,8 +121,27 @@ def test_retry_replaces_the_colliding_segment_before_any_fallback():
     assert safe.rule == "retry" and safe.retried_segments == 1 and planner.calls == 1
     assert check_collision(safe.path, ROBOT, grid).collision_free
     assert np.allclose(safe.path[3:7], [[1.5, 1.0], [1.5, 3.4], [4.5, 3.4], [4.5, 1.0]])
-    # without segments (e.g. an SD or FD plan) the retry rule cannot act: A* does
+    assert planner.plans == 0  # the retry made it free: no plan drawn again
+    # without segments (e.g. an SD or FD plan) the retry rule cannot act; the plans drawn
+    # again (twice, the default) still cross the wall: A* does
     assert SafetyNet(grid, ROBOT, planner=planner).apply(path).rule == "fallback"
+    assert planner.plans == 2
+
+
+def test_a_plan_drawn_again_comes_before_the_fallback():
+    grid = wall_map()
+    start, goal = np.array([1.0, 1.0]), np.array([5.0, 1.0])
+    planner = DetourPlanner(bad_plans=1)
+    safe = SafetyNet(grid, ROBOT, planner=planner).apply(line(start, goal))
+    assert safe.rule == "resample" and safe.resampled == 2 and planner.plans == 2
+    assert safe.collided_before and safe.stretches == ()
+    assert check_collision(safe.path, ROBOT, grid).collision_free
+    assert np.allclose(safe.path[0], start) and np.allclose(safe.path[-1], goal)
+    # the rule off: straight to A*
+    planner = DetourPlanner(bad_plans=0)
+    safe = SafetyNet(grid, ROBOT, SafetyNetConfig(resamples=0), planner=planner).apply(
+        line(start, goal))
+    assert safe.rule == "fallback" and planner.plans == 0 and safe.resampled == 0
 
 
 def test_bad_segments_match_a_segment_by_segment_check():
@@ -128,3 +158,5 @@ def test_config_is_validated():
         SafetyNetConfig(fallback="rrt")
     with pytest.raises(EcahdError):
         SafetyNetConfig(retries=-1)
+    with pytest.raises(EcahdError, match="resamples"):
+        SafetyNetConfig(resamples=-1)

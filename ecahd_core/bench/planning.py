@@ -93,6 +93,7 @@ class PlanningBenchSettings:
     ablation: bool = True
     safety_net: bool = True  # ours: judge HD / ECAHD with and without the net (ecahd_core.safety)
     net_retries: int = 2  # SafetyNetConfig's default
+    net_resamples: int = 2  # SafetyNetConfig's default (0: the net skips its resample rule)
 
 
 @dataclass
@@ -117,6 +118,7 @@ class CellResult:
     net_collision_free: float | None = None  # % after the net
     net_success_free: float | None = None
     net_retry_rate: float | None = None  # % of plans where DD retries made the plan free
+    net_resample_rate: float | None = None  # % of plans drawn again, then free
     net_fallback_rate: float | None = None  # % of plans with A* stretches spliced in
     net_unsafe_rate: float | None = None  # % of plans with no safe plan
     net_time_ms_mean: float | None = None  # planning + net
@@ -238,7 +240,8 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                     return r.trajectory, r.dd_segments
 
                 if settings.safety_net and not variant:
-                    net = SafetyNet(grid, fp, SafetyNetConfig(retries=settings.net_retries),
+                    net = SafetyNet(grid, fp, SafetyNetConfig(
+                        retries=settings.net_retries, resamples=settings.net_resamples),
                                     planner=hd, astar=astar_for(robot, fp))
                     net_gen = torch.Generator().manual_seed(settings.sample_seed + 1)
         paths, times, dd, kept = [], [], [], []
@@ -267,13 +270,14 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
             rate = lambda rule: 100 * float(np.mean([r == rule for r in net_rules]))  # noqa: E731
             cell.net_collision_free, cell.net_success_free = after.collision_free, after.success_free
             cell.net_retry_rate, cell.net_fallback_rate = rate("retry"), rate("fallback")
+            cell.net_resample_rate = rate("resample")
             cell.net_unsafe_rate = rate("unsafe")
             cell.net_time_ms_mean, cell.net_time_ms_p95 = after.time_ms_mean, after.time_ms_p95
             cell.net_time_ms_median = after.time_ms_median
-            log.info("%s with the safety net: collision-free %.1f%%, retry %.1f%%, fallback "
-                     "%.1f%%, unsafe %.1f%%, %.0f ms", label, cell.net_collision_free,
-                     cell.net_retry_rate, cell.net_fallback_rate, cell.net_unsafe_rate,
-                     cell.net_time_ms_mean)
+            log.info("%s with the safety net: collision-free %.1f%%, retry %.1f%%, resample "
+                     "%.1f%%, fallback %.1f%%, unsafe %.1f%%, %.0f ms", label,
+                     cell.net_collision_free, cell.net_retry_rate, cell.net_resample_rate,
+                     cell.net_fallback_rate, cell.net_unsafe_rate, cell.net_time_ms_mean)
         return cell, paths
 
     for robot in settings.robots:
@@ -303,6 +307,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                "replan": settings.replan, "warm_fraction": settings.warm_fraction,
                "max_spacing": settings.max_spacing, "place_reach": place_reach,
                "safety_net": settings.safety_net, "net_retries": settings.net_retries,
+               "net_resamples": settings.net_resamples,
                "torch": torch.__version__,
                "threads": torch.get_num_threads()}
     return PlanningBenchResult(cells=cells, ablation=ablation, examples=examples,
@@ -374,15 +379,17 @@ def format_markdown(r: PlanningBenchResult) -> str:
     netted = [x for x in r.cells if x.net_collision_free is not None]
     if netted:
         lines += ["", f"The safety net (ours, beyond the paper; DD retries "
-                  f"{c.get('net_retries', '–')}, then A* for the offending stretches): the same "
-                  "paths without / with the net. Retry, fallback and unsafe: share of plans where "
+                  f"{c.get('net_retries', '–')}, whole plans drawn again "
+                  f"{c.get('net_resamples', 0)}, then A* for the offending stretches): the same "
+                  "paths without / with the net. Retry, resample, fallback and unsafe: share of "
+                  "plans where "
                   "that rule acted last. Exact rule: share of plans where the planner itself put "
                   "back a straight or unpolished local plan the exact checker finds free "
                   "(HierarchicalPlanner's exact_check; counted in ECAHD alone).", "",
                   "| method | guidance | robot | collision-free % | success & free % | exact rule % "
-                  "| retry % | fallback % | unsafe % | time mean ms | time median ms | "
-                  "time p95 ms |",
-                  "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+                  "| retry % | resample % | fallback % | unsafe % | time mean ms | "
+                  "time median ms | time p95 ms |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for x in netted:
             lines.append(
                 f"| {METHOD_LABELS[x.method]}{' (ECAHD)' if x.guidance else ''} | "
@@ -391,6 +398,7 @@ def format_markdown(r: PlanningBenchResult) -> str:
                 f"{x.success_free:.1f} → {x.net_success_free:.1f} | "
                 f"{'–' if x.exact_rule_rate is None else f'{x.exact_rule_rate:.1f}'} | "
                 f"{x.net_retry_rate:.1f} | "
+                f"{'–' if x.net_resample_rate is None else f'{x.net_resample_rate:.1f}'} | "
                 f"{x.net_fallback_rate:.1f} | {x.net_unsafe_rate:.1f} | "
                 f"{x.time_ms_mean:.1f} → {x.net_time_ms_mean:.1f} | "
                 f"{x.time_ms_median:.1f} → {x.net_time_ms_median:.1f} | "

@@ -205,6 +205,9 @@ def _add_planning_arguments(parser: argparse.ArgumentParser) -> None:
                         help="HD: keep a refined local plan the exact checker finds colliding "
                              "even where the straight or unpolished one is free (ours: put "
                              "that back)")
+    parser.add_argument("--net-resamples", type=int, default=d.net_resamples, metavar="N",
+                        help="the safety net's whole plans drawn again before its A* fallback "
+                             "(0: skip that rule)")
     add_replan_argument(parser, d.replan, d.warm_fraction)
     add_precision_argument(parser, d.precision, "the SD Transformer's inference precision "
                                                 "(auto: bf16 where the CPU has native bfloat16)")
@@ -235,7 +238,8 @@ def _run_planning(args: argparse.Namespace) -> int:
         c_th=args.c_th, dd_retries=args.dd_retries, polish_steps=args.polish_steps,
         keep_better=not args.no_keep_better, exact_rule=not args.no_exact_rule,
         replan=args.replan, warm_fraction=args.warm_fraction, max_spacing=args.max_spacing,
-        place_reach=args.place_reach, ablation=not args.no_ablation, precision=args.precision)
+        place_reach=args.place_reach, ablation=not args.no_ablation, precision=args.precision,
+        net_resamples=args.net_resamples)
     result = run_planning_benchmark(settings, progress=not args.no_progress)
     md = format_markdown(result)
     print(md)

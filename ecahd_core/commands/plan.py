@@ -96,8 +96,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_replan_argument(p)
     p.add_argument("--safety-net", action=argparse.BooleanOptionalAction, default=True,
                    help="ours, beyond the paper: judge the plan by the exact checker; when it "
-                        "collides, sample the colliding DD segments again, then splice in A* for "
-                        "the offending stretches; exit 2 when no safe plan exists")
+                        "collides, sample the colliding DD segments again, then draw the whole "
+                        "plan again (twice at most), then splice in A* for the offending "
+                        "stretches; exit 2 when no safe plan exists")
     p.add_argument("--seed", type=int, default=0, help="sampling seed")
     p.add_argument("--sd-model", default=None, help="SD checkpoint (default: the shipped one)")
     p.add_argument("--dd-model", default=None, help="DD checkpoint (default: the shipped one)")
@@ -194,6 +195,7 @@ def run(args: argparse.Namespace) -> int:
                                           else not safe.collided_before),
             "fallback_stretches": [] if safe is None else [list(s) for s in safe.stretches],
             "retried_segments": 0 if safe is None else safe.retried_segments,
+            "resampled_plans": 0 if safe is None else safe.resampled,
             "unsafe_reason": None if safe is None or safe.safe else safe.reason,
         }
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
