@@ -55,8 +55,8 @@ class SafetyNetConfig:
             (rule 1); 0 skips the rule.
         samples: DD candidates per colliding segment and round (one batch).
         resamples: whole plans drawn again (rule 2) before the fallback; 0 skips the rule.
-        fallback: "astar" (rule 2: A* with the footprint's clearance for the offending
-            stretches) or "none" (a plan still colliding after rule 1 is unsafe).
+        fallback: "astar" (rule 3: A* with the footprint's clearance for the offending
+            stretches) or "none" (a plan still colliding after rules 1 and 2 is unsafe).
         padding: [m] added to the footprint's circumscribed radius for the fallback's A*.
         max_widen: how many times one stretch may be widened (one point each side) when its A*
             path still collides or cannot be planned.
