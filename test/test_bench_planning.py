@@ -1,6 +1,8 @@
 """`ecahd bench planning --problems 4` with the shipped models: well-formed JSON and markdown."""
 import json
 
+import pytest
+
 from ecahd_ros.cli import main
 
 KEYS = {"method", "guidance", "robot", "success", "success_final", "collision_free",
