@@ -41,11 +41,53 @@ from ecahd_core.errors import EcahdError, PlanningError
 log = logging.getLogger("ecahd.navigation")
 
 REPLAN_POLICIES = ("every_waypoint", "once")
+
 COORDINATE_LIMIT = 1e6  # [m] |x|, |y| beyond this is absurd whatever the map
 MAX_PLAN_POINTS = 100_000  # a plan with more poses is rejected
 PLAN_MARGIN = 1.0  # [m] plan points may lie this far outside the map's bounds
 SIMPLIFY_TOLERANCE = 0.005  # [m] interior plan points this close to the chord are dropped
 WAITING_END_DISTANCE = 0.05  # [m] at the end of the local plan with nothing next: stop
+
+
+REPLAN_SPACING = 3.0  # [m] the replan spacing chosen by a big map (auto_replan_spacing)
+
+
+def auto_replan_spacing(grid) -> float | None:
+    """[m] the replan spacing (:func:`replan_horizon`) chosen by the map: REPLAN_SPACING on maps
+    over ``astar.COARSE_ABOVE_CELLS`` cells (buildings), None (Algorithm 1's P^g - p) on
+    smaller ones, so maze2d-large keeps the paper's rule."""
+    from ecahd_core.astar import COARSE_ABOVE_CELLS
+
+    return REPLAN_SPACING if grid.width * grid.height > COARSE_ABOVE_CELLS else None
+
+
+def replan_spacing_for(grid, value: float | None) -> float | None:
+    """A replan-spacing setting [m] as the commands take it: None by the map
+    (:func:`auto_replan_spacing`), 0 off, else ``value``."""
+    if value is None:
+        return auto_replan_spacing(grid)
+    if not (math.isfinite(value) and value >= 0):
+        raise EcahdError(f"replan spacing must be >= 0 m (0: off), got {value}")
+    return value or None
+
+
+def replan_horizon(horizon: int, iteration: int, start, goal,
+                   spacing: float | None = None) -> int:
+    """The horizon of Algorithm 1's p-th SD plan: P^g - p, at least 2 (line 2).
+
+    With ``spacing`` [m] (ours, for big maps; None: the paper's rule) at least
+    ceil(D / spacing) + 1 and at most P^g, for the straight distance D [m] from ``start`` (2,)
+    to ``goal`` (2,): the horizon shrinks with the distance left, not with the count of
+    waypoints reached. Algorithm 1 as written ends with a plan of horizon 2, the straight line
+    to the goal, after P^g - 2 re-plans wherever the robot then is; on a building SD's first
+    waypoints often lie close together, and that last straight leg crossed shelf rows for
+    8-35 m (every colliding circle-robot plan on a generated warehouse, docs/RESULTS.md)."""
+    h = max(2, horizon - iteration)
+    if spacing is not None:
+        d = float(np.linalg.norm(np.asarray(goal, dtype=np.float64)
+                                 - np.asarray(start, dtype=np.float64)))
+        h = max(h, min(horizon, int(math.ceil(d / spacing - 1e-9)) + 1))
+    return h
 
 
 # --------------------------------------------------------------------------- input checks
@@ -135,6 +177,8 @@ class GlobalRunnerConfig:
             never move (seen on a 2-core machine at 4x real time).
         replan: "every_waypoint" (Algorithm 1) or "once" (one plan per goal).
         min_plan_interval: [s] goals closer in time than this are coalesced.
+        replan_spacing: [m] re-plans keep enough waypoints for the distance left to the goal
+            (:func:`replan_horizon`; ours; None: Algorithm 1's P^g - p).
     """
 
     horizon: int = 10
@@ -142,6 +186,7 @@ class GlobalRunnerConfig:
     replan_timeout: float = 5.0
     replan: str = "every_waypoint"
     min_plan_interval: float = 0.05
+    replan_spacing: float | None = None
 
     def __post_init__(self) -> None:
         if self.horizon < 2:
@@ -152,6 +197,10 @@ class GlobalRunnerConfig:
             raise EcahdError("replan_timeout and min_plan_interval must be >= 0 s")
         if self.replan not in REPLAN_POLICIES:
             raise EcahdError(f"replan {self.replan!r} is not one of {list(REPLAN_POLICIES)}")
+        if self.replan_spacing is not None and not (math.isfinite(self.replan_spacing)
+                                                    and self.replan_spacing > 0):
+            raise EcahdError(f"replan_spacing must be None (off) or a finite number > 0 m, "
+                             f"got {self.replan_spacing}")
 
 
 @dataclass(frozen=True)
@@ -236,7 +285,7 @@ class GlobalRunner:
         if float(np.linalg.norm(xy - self.goal)) < c.waypoint_tolerance:
             self.cancel()
             return "reached"
-        horizon = max(2, c.horizon - self.iteration)
+        horizon = replan_horizon(c.horizon, self.iteration, xy, self.goal, c.replan_spacing)
         if self._forced is not None:
             reason, self._forced = self._forced, None
             return PlanRequest(xy, self.goal.copy(), horizon, reason)
@@ -247,8 +296,8 @@ class GlobalRunner:
                 float(np.linalg.norm(xy - self.waypoints[nxt])) < c.waypoint_tolerance:
             self.iteration += 1  # MoveAgent reached t^g_p[1]: replan with P^g - p
             self.stalls = 0
-            return PlanRequest(xy, self.goal.copy(), max(2, c.horizon - self.iteration),
-                               "waypoint")
+            return PlanRequest(xy, self.goal.copy(), replan_horizon(
+                c.horizon, self.iteration, xy, self.goal, c.replan_spacing), "waypoint")
         timeout = c.replan_timeout * 2 ** min(self.stalls, MAX_STALL_DOUBLINGS)
         if c.replan_timeout > 0 and now - self._last_plan > timeout:
             self._last_plan = now  # one timeout replan per period even if planning fails

@@ -11,6 +11,7 @@ Selection rules for the best of N candidates t^{g,(i)} (Sec. III-A):
 """
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field, replace
 
@@ -18,6 +19,7 @@ import numpy as np
 import torch
 
 from ecahd_core.errors import EcahdError
+from ecahd_core.navigation import REPLAN_POLICIES, replan_horizon
 
 SELECTION_RULES = ("shortest_reaching", "collision_aware")
 
@@ -470,10 +472,10 @@ class LocalStages:
     exact_kept: torch.Tensor
 
 
-REPLAN_POLICIES = ("every_waypoint", "once")
-# every_waypoint with SparseConfig.max_spacing: iterations beyond P^g - 1 before the last one is
-# made to go straight to the goal
+# every_waypoint with SparseConfig.max_spacing or a replan spacing: iterations beyond P^g - 1
+# before the last one is made to go straight to the goal
 MAX_EXTRA_ITERATIONS = 30
+
 
 
 class HierarchicalPlanner:
@@ -491,6 +493,9 @@ class HierarchicalPlanner:
             waypoints are the global plan of every later iteration; in a static known map the
             replanned distribution is the same, so this trades resampling for ~P^g times less SD
             work).
+        replan_spacing: [m] every_waypoint: each SD re-plan keeps enough waypoints for the
+            distance left to the goal (:func:`replan_horizon`; ours; None: Algorithm 1's
+            P^g - p).
         exact_check: the exact rule (ours; None: off, the paper's). A function of a path
             (N, 2) [m] float64 giving (N - 1,) bool, its segments that collide:
             ``collision.exact_check_for(grid, footprint)``.
@@ -502,10 +507,15 @@ class HierarchicalPlanner:
 
     def __init__(self, sparse: SparseDiffusion, dense_checkpoint, *, costmap, footprint_points,
                  cost_config=None, dense: DenseConfig | None = None, device: str = "cpu",
-                 replan: str = "every_waypoint", exact_check=None) -> None:
+                 replan: str = "every_waypoint", exact_check=None,
+                 replan_spacing: float | None = None) -> None:
         if replan not in REPLAN_POLICIES:
             raise EcahdError(f"replan policy {replan!r} is not one of {list(REPLAN_POLICIES)}")
-        self.replan = replan
+        if replan_spacing is not None and not (math.isfinite(replan_spacing)
+                                               and replan_spacing > 0):
+            raise EcahdError(f"replan_spacing must be None (off) or a finite number > 0 m, "
+                             f"got {replan_spacing}")
+        self.replan, self.replan_spacing = replan, replan_spacing
         self.exact_check = exact_check
         from ecahd_core.cost import CostConfig
         from ecahd_core.diffusion import DiffusionSampler, SamplerConfig
@@ -767,9 +777,11 @@ class HierarchicalPlanner:
         while True:
             t0 = time.perf_counter()
             forced = p >= P_g - 2 + MAX_EXTRA_ITERATIONS
+            horizon = 2 if forced else replan_horizon(P_g, p, S.numpy(), G.numpy(),
+                                                      self.replan_spacing)
             sparse = self.sparse.replan(S.numpy(), G.numpy(),
                                         global_plans[-1] if global_plans else None,
-                                        horizon=max(2, P_g - p), generator=generator,
+                                        horizon=horizon, generator=generator,
                                         densify=not forced)  # lines 2-12
             waypoints, placed = sparse.waypoints, placed + sparse.placed
             times["sd"] += (time.perf_counter() - t0) * 1e3

@@ -132,6 +132,12 @@ PARAMETERS = [
                                          "reached"),
     ParamSpec("replan", "every_waypoint", f"sd: {list(REPLAN_POLICIES)} (every_waypoint: "
                                           "Algorithm 1; once: one SD plan per goal)"),
+    ParamSpec("replan_spacing", -1.0, "[m] sd, every_waypoint: each re-plan keeps at least "
+                                      "ceil(D / this) + 1 waypoints (at most P^g) for the "
+                                      "straight distance D left to the goal, instead of "
+                                      "Algorithm 1's P^g - p, whose last plan is a straight "
+                                      "line to the goal wherever the robot is; -1 = by the "
+                                      "map: 3.0 on maps over 50 000 cells, else off; 0 = off"),
     ParamSpec("replan_timeout", 5.0, "[s] sd: with no waypoint reached for this long, replan "
                                      "from the current pose (same horizon); doubles with each "
                                      "further such replan (at most 8x) until a waypoint is "
@@ -177,6 +183,7 @@ class GlobalPlannerParams:
     clearance_margin: float
     waypoint_tolerance: float
     replan: str
+    replan_spacing: float
     replan_timeout: float
     warm_fraction: float
     obstacle_memory: float
@@ -195,6 +202,8 @@ class GlobalPlannerParams:
                              "obstacle_memory", "clearance_margin", "max_spacing", "leg_repair")
         require(self.place_reach >= 0 or self.place_reach == -1, "place_reach",
                 self.place_reach, ">= 0 m, or -1 (by the map's size)")
+        require(self.replan_spacing >= 0 or self.replan_spacing == -1, "replan_spacing",
+                self.replan_spacing, ">= 0 m, or -1 (by the map's size)")
         require(self.method in METHODS, "method", self.method, f"one of {list(METHODS)}")
         require(self.horizon >= 2, "horizon", self.horizon, ">= 2")
         require(self.selection in SELECTION_RULES, "selection", self.selection,
@@ -206,11 +215,19 @@ class GlobalPlannerParams:
         require(0.0 <= self.warm_fraction <= 1.0, "warm_fraction", self.warm_fraction,
                 "in 0..1 (0: off)")
 
-    def runner_config(self) -> GlobalRunnerConfig:
+    def runner_config(self, grid=None) -> GlobalRunnerConfig:
+        """The runner's settings; ``replan_spacing`` -1 is decided by ``grid`` (off without
+        one, before the map arrives)."""
+        from ecahd_core.navigation import auto_replan_spacing
+
+        spacing = self.replan_spacing or None
+        if spacing == -1:
+            spacing = auto_replan_spacing(grid) if grid is not None else None
         # the baselines plan one whole path per goal
         return GlobalRunnerConfig(horizon=self.horizon, waypoint_tolerance=self.waypoint_tolerance,
                                   replan_timeout=self.replan_timeout if self.method == "sd" else 0,
-                                  replan=self.replan if self.method == "sd" else "once")
+                                  replan=self.replan if self.method == "sd" else "once",
+                                  replan_spacing=spacing)
 
     def sparse_config(self) -> SparseConfig:
         return SparseConfig(num_candidates=self.num_candidates, horizon=self.horizon,
@@ -345,6 +362,7 @@ class GlobalPlanner(Node):
         else:
             fd = self._build_fd(grid)
         self.grid, self.sparse, self.astar, self.fd = grid, sparse, astar, fd
+        self.runner.config = p.runner_config(grid)  # replan_spacing may depend on the map
         from ecahd_core.sensing import ObstacleMemory
 
         self.memory = ObstacleMemory(grid, p.obstacle_memory)

@@ -222,7 +222,7 @@ def test_same_seed_reproduces_the_plan(rig):
 
 @pytest.mark.parametrize("name,value", [("horizon", 1), ("num_candidates", 0),
                                         ("selection", "random"), ("epsilon", -1.0),
-                                        ("warm_fraction", 1.5)])
+                                        ("warm_fraction", 1.5), ("replan_spacing", -2.0)])
 def test_bad_parameters_are_named(name, value):
     values = {spec.name: spec.default for spec in PARAMETERS}  # the declared defaults
     values[name] = value
@@ -303,6 +303,22 @@ def test_astar_from_a_pose_without_clearance_and_an_unreachable_goal(rig):
     r.send_goal((1.5, 1.15))  # free but without the circle's clearance: rejected
     r.spin_for(0.3)
     assert len(r.plans) == 1 and r.planner.goal is None
+
+
+def test_replan_spacing_is_decided_by_the_map():
+    from types import SimpleNamespace
+
+    from ecahd_core.navigation import REPLAN_SPACING
+
+    values = {spec.name: spec.default for spec in PARAMETERS}  # -1: by the map
+    params = GlobalPlannerParams(**values)
+    big, small = SimpleNamespace(width=1000, height=1667), SimpleNamespace(width=120, height=90)
+    assert params.runner_config(big).replan_spacing == REPLAN_SPACING  # a building
+    assert params.runner_config(small).replan_spacing is None  # maze2d-large: the paper's
+    assert params.runner_config().replan_spacing is None  # no map yet
+    for value, want in ((0.0, None), (2.5, 2.5)):
+        values["replan_spacing"] = value
+        assert GlobalPlannerParams(**values).runner_config(big).replan_spacing == want
 
 
 def test_bad_method_is_named():

@@ -12,7 +12,7 @@ from ecahd_core.controller import PathTracker
 from ecahd_core.errors import EcahdError, PlanningError
 from ecahd_core.navigation import (MAX_PLAN_POINTS, GlobalRunner, GlobalRunnerConfig,
                                    LocalRunner, LocalRunnerConfig, PlanRequest, SegmentResult,
-                                   simplify, validate_plan)
+                                   replan_horizon, simplify, validate_plan)
 
 PLAN = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [2.0, 1.0]])
 
@@ -30,6 +30,27 @@ def test_goal_then_waypoints_shrink_the_horizon():
     r.accept(PLAN[1:], 0.2)
     assert r.step((1.95, 1.0), 0.3) == "reached" and r.goal is None
     assert r.step((1.95, 1.0), 0.4) is None
+
+
+def test_replan_horizon_shrinks_with_the_distance_left_when_spaced():
+    S, G = (0.0, 0.0), (34.0, 0.0)
+    assert [replan_horizon(10, p, S, G) for p in (0, 7, 8, 12)] == [10, 3, 2, 2]  # Alg. 1
+    # 3 m spacing: 34 m left needs 13 waypoints, capped at P^g, whatever p is
+    assert replan_horizon(10, 8, S, G, 3.0) == 10
+    assert replan_horizon(10, 8, S, (8.2, 0.0), 3.0) == 4  # ceil(2.73) + 1
+    assert replan_horizon(10, 8, S, (3.0, 0.0), 3.0) == 2  # within one spacing: straight
+    assert replan_horizon(10, 2, S, (3.0, 0.0), 3.0) == 8  # never below P^g - p
+
+
+def test_a_spaced_runner_asks_for_the_horizon_the_distance_needs():
+    r = GlobalRunner(GlobalRunnerConfig(horizon=4, waypoint_tolerance=0.3, replan_spacing=0.5))
+    r.set_goal((2.0, 1.0))
+    assert r.step((0.0, 0.0), 0.0).horizon == 4
+    r.accept(PLAN, 0.0)
+    req = r.step((0.9, 0.05), 0.2)  # waypoint 1 reached, 1.5 m left: 4, not P^g - 1 = 3
+    assert req.reason == "waypoint" and r.iteration == 1 and req.horizon == 4
+    with pytest.raises(EcahdError, match="replan_spacing"):
+        GlobalRunnerConfig(replan_spacing=0.0)
 
 
 def test_a_waypoint_at_the_start_does_not_count_as_reached():

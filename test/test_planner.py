@@ -5,6 +5,7 @@ import pytest
 import torch
 
 from ecahd_core.cost import CostConfig
+from ecahd_core.errors import EcahdError
 from ecahd_core.footprint import make_footprint
 from ecahd_core.maps import builtin_map
 from ecahd_core.model_zoo import load_model
@@ -36,6 +37,23 @@ def test_algorithm1_reaches_goal_in_pg_iterations():
     for a, b in zip(plan.segments, plan.segments[1:]):
         assert np.allclose(a[-1], b[0])
     assert set(plan.timings_ms) == {"sd", "j_check", "dd", "polish", "exact", "total"}
+
+
+def test_a_replan_spacing_keeps_waypoints_until_the_goal_is_near():
+    start, goal = np.array([1.5, 1.5]), np.array([10.5, 7.5])
+    planner = make_planner(replan_spacing=1.0)
+    plan = planner.plan(start, goal, generator=torch.Generator().manual_seed(0))
+    P_g = planner.sparse.config.horizon
+    ends = [(g[0], g[-1]) for g in plan.global_plans]
+    for (s, g), wp in zip(ends, plan.global_plans):  # each plan as long as its distance asks
+        need = min(P_g, int(np.ceil(np.linalg.norm(g - s) / 1.0 - 1e-9)) + 1)
+        assert len(wp) >= need
+    # only the last plan goes straight to the goal, and only from within 1 m of it
+    assert len(plan.global_plans[-1]) == 2 and all(len(w) > 2 for w in plan.global_plans[:-1])
+    assert np.linalg.norm(ends[-1][1] - ends[-1][0]) <= 1.0 + 1e-5
+    assert np.allclose(plan.trajectory[-1], goal, atol=1e-5)
+    with pytest.raises(EcahdError, match="replan_spacing"):
+        make_planner(replan_spacing=-1.0)
 
 
 @pytest.mark.parametrize("c_th", [0.1, 1e9])
@@ -298,7 +316,6 @@ def test_local_plans_have_the_points_the_dd_checkpoint_learnt(tmp_path):
     # P^l is the DD checkpoint's (DenseConfig.points None): the paper's 4 for the shipped model;
     # a DD trained on 7-point segments (a big map's "auto" P^l) gives 7-point local plans
     from ecahd_core.diffusion import DenoiserConfig, Normalizer, TrainConfig, train
-    from ecahd_core.errors import EcahdError
     from ecahd_core.model_zoo import dense_points
 
     fp = make_footprint("circle")

@@ -89,6 +89,7 @@ class PlanningBenchSettings:
     max_spacing: float | None = None  # [m] SparseConfig.max_spacing (None: off)
     place_reach: float | None = None  # [m] placement.placer_for (0: off; None: by map size)
     warm_fraction: float = 0.0  # SparseConfig.warm_fraction: HD's warm-started re-plans (0: off)
+    replan_spacing: float | None = None  # [m] HierarchicalPlanner's (None: by the map; 0: off)
     precision: str = "fp32"  # the SD Transformer's inference precision (SparseConfig.precision)
     ablation: bool = True
     safety_net: bool = True  # ours: judge HD / ECAHD with and without the net (ecahd_core.safety)
@@ -175,6 +176,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
     from ecahd_core.footprint import make_footprint
     from ecahd_core.maps import load_map
     from ecahd_core.model_zoo import load_model
+    from ecahd_core.navigation import replan_spacing_for
     from ecahd_core.placement import auto_reach, placer_for
     from ecahd_core.planner import (DenseConfig, FullDiffusion, HierarchicalPlanner, SparseConfig,
                                     SparseDiffusion)
@@ -184,6 +186,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
     grid = load_map(settings.map)
     place_reach = (auto_reach(grid) if settings.place_reach is None  # what "auto" chose
                    else settings.place_reach)
+    replan_spacing = replan_spacing_for(grid, settings.replan_spacing)
     problems = make_problems(grid, settings.problems, seed=settings.seed)
     cells, ablation, examples = [], [], {}
     astars = {}  # robot -> AStarPlanner: one clearance mask per map and robot, reused
@@ -228,6 +231,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                                              polish_steps=settings.polish_steps,
                                              keep_better=settings.keep_better),
                                          replan=settings.replan,
+                                         replan_spacing=replan_spacing,
                                          exact_check=(exact_check_for(grid, fp)
                                                       if settings.exact_rule and not variant
                                                       else None))
@@ -305,6 +309,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                "dd_retries": settings.dd_retries, "polish_steps": settings.polish_steps,
                "keep_better": settings.keep_better, "exact_rule": settings.exact_rule,
                "replan": settings.replan, "warm_fraction": settings.warm_fraction,
+               "replan_spacing": replan_spacing,
                "max_spacing": settings.max_spacing, "place_reach": place_reach,
                "safety_net": settings.safety_net, "net_retries": settings.net_retries,
                "net_resamples": settings.net_resamples,
@@ -337,6 +342,8 @@ def format_markdown(r: PlanningBenchResult) -> str:
              f"SD replanning {c['replan']}"
              + (f" warm-started at {c['warm_fraction']:g} of the schedule"
                 if c.get("warm_fraction") and c["replan"] == "every_waypoint" else "")
+             + (f", re-plans keep a waypoint per {c['replan_spacing']:g} m left to the goal"
+                if c.get("replan_spacing") and c["replan"] == "every_waypoint" else "")
              + (f", waypoints at most {c['max_spacing']:g} m apart (SD re-samples longer legs)"
                 if c.get("max_spacing") else "")
              + (f", SD's waypoints in walls placed in free space within {c['place_reach']:g} m "

@@ -239,7 +239,7 @@ def _run_planning(args: argparse.Namespace) -> int:
         keep_better=not args.no_keep_better, exact_rule=not args.no_exact_rule,
         replan=args.replan, warm_fraction=args.warm_fraction, max_spacing=args.max_spacing,
         place_reach=args.place_reach, ablation=not args.no_ablation, precision=args.precision,
-        net_resamples=args.net_resamples)
+        net_resamples=args.net_resamples, replan_spacing=args.replan_spacing)
     result = run_planning_benchmark(settings, progress=not args.no_progress)
     md = format_markdown(result)
     print(md)
