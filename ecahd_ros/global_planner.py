@@ -369,8 +369,11 @@ class GlobalPlanner(Node):
         self._static_cost = sparse.cost if sparse is not None else None
         self._placer_cache = None  # a new map: a new distance transform
         ms = (time.perf_counter() - t0) * 1e3
+        spacing = self.runner.config.replan_spacing
         self.get_logger().info(f"map {grid.name!r} received ({grid.width} x {grid.height} "
-                               f"cells); {p.method} planner built in {ms:.0f} ms{warm}")
+                               f"cells); {p.method} planner built in {ms:.0f} ms{warm}"
+                               + (f"; re-plans keep a waypoint per {spacing:g} m left to the "
+                                  f"goal (replan_spacing)" if spacing else ""))
         self._ready_pub.publish(String(data=json.dumps(
             {"map": grid.name, "method": p.method, "ms": round(ms, 1)})))
         if self.runner.goal is not None:
