@@ -765,8 +765,9 @@ class HierarchicalPlanner:
             return self._plan_once(S, G, generator, t_total)
         # Algorithm 1 line 1: P^g - 1 iterations, the last one reaching G. With waypoint spacing
         # by distance (SparseConfig.max_spacing) a plan may have more waypoints than its
-        # horizon: the iterations go on (horizon 2) until a plan is just (S, G), at most
-        # MAX_EXTRA_ITERATIONS more, after which the last one goes straight to G.
+        # horizon, and with a replan spacing the horizon stays up while G is far: the
+        # iterations go on until a plan is just (S, G), at most MAX_EXTRA_ITERATIONS more,
+        # after which the last one goes straight to G.
         # MoveAgent takes the agent to the end of the local plan, t^g_p[1] (DD inpaints it), so
         # iteration p + 1's SD call needs only iteration p's SD plan: the SD calls run first,
         # then every iteration's local stage (lines 13-18) in one batch, as for replan "once":
