@@ -5,7 +5,8 @@ controller plugin split), and unit tests drive them with fake clocks and poses.
 :class:`GlobalRunner` (global_planner): when to ask the Sparse Diffusion planner for a plan.
     A goal asks for a plan of horizon P^g at once; each time the robot comes within
     ``waypoint_tolerance`` of the plan's next waypoint, the p-th replan asks for horizon
-    P^g - p (Algorithm 1 lines 2-11, ``replan`` "every_waypoint"); with ``replan`` "once" (ours,
+    P^g - p (Algorithm 1 lines 2-11, ``replan`` "every_waypoint"; with ``replan_spacing``, ours,
+    at least what the distance left needs, :func:`replan_horizon`); with ``replan`` "once" (ours,
     and the Table III baselines A* and FD) one plan serves the whole goal. Beyond the paper, a
     robot that reaches no waypoint for ``replan_timeout`` seconds replans from where it is, and
     goals that arrive faster than ``min_plan_interval`` are coalesced (the latest wins), so the
