@@ -42,15 +42,12 @@ from ecahd_core.errors import EcahdError, PlanningError
 log = logging.getLogger("ecahd.navigation")
 
 REPLAN_POLICIES = ("every_waypoint", "once")
-
+REPLAN_SPACING = 3.0  # [m] the replan spacing chosen by a big map (auto_replan_spacing)
 COORDINATE_LIMIT = 1e6  # [m] |x|, |y| beyond this is absurd whatever the map
 MAX_PLAN_POINTS = 100_000  # a plan with more poses is rejected
 PLAN_MARGIN = 1.0  # [m] plan points may lie this far outside the map's bounds
 SIMPLIFY_TOLERANCE = 0.005  # [m] interior plan points this close to the chord are dropped
 WAITING_END_DISTANCE = 0.05  # [m] at the end of the local plan with nothing next: stop
-
-
-REPLAN_SPACING = 3.0  # [m] the replan spacing chosen by a big map (auto_replan_spacing)
 
 
 def auto_replan_spacing(grid) -> float | None:
@@ -70,6 +67,14 @@ def replan_spacing_for(grid, value: float | None) -> float | None:
     if not (math.isfinite(value) and value >= 0):
         raise EcahdError(f"replan spacing must be >= 0 m (0: off), got {value}")
     return value or None
+
+
+def check_replan_spacing(spacing: float | None) -> float | None:
+    """``spacing`` [m] if it is None (off) or a finite number > 0, else EcahdError."""
+    if spacing is not None and not (math.isfinite(spacing) and spacing > 0):
+        raise EcahdError(f"replan_spacing must be None (off) or a finite number > 0 m, "
+                         f"got {spacing}")
+    return spacing
 
 
 def replan_horizon(horizon: int, iteration: int, start, goal,
@@ -198,10 +203,7 @@ class GlobalRunnerConfig:
             raise EcahdError("replan_timeout and min_plan_interval must be >= 0 s")
         if self.replan not in REPLAN_POLICIES:
             raise EcahdError(f"replan {self.replan!r} is not one of {list(REPLAN_POLICIES)}")
-        if self.replan_spacing is not None and not (math.isfinite(self.replan_spacing)
-                                                    and self.replan_spacing > 0):
-            raise EcahdError(f"replan_spacing must be None (off) or a finite number > 0 m, "
-                             f"got {self.replan_spacing}")
+        check_replan_spacing(self.replan_spacing)
 
 
 @dataclass(frozen=True)
@@ -286,10 +288,9 @@ class GlobalRunner:
         if float(np.linalg.norm(xy - self.goal)) < c.waypoint_tolerance:
             self.cancel()
             return "reached"
-        horizon = replan_horizon(c.horizon, self.iteration, xy, self.goal, c.replan_spacing)
         if self._forced is not None:
             reason, self._forced = self._forced, None
-            return PlanRequest(xy, self.goal.copy(), horizon, reason)
+            return PlanRequest(xy, self.goal.copy(), self._horizon(xy), reason)
         if c.replan == "once" or self._hold:
             return None
         nxt = self._next
@@ -297,14 +298,18 @@ class GlobalRunner:
                 float(np.linalg.norm(xy - self.waypoints[nxt])) < c.waypoint_tolerance:
             self.iteration += 1  # MoveAgent reached t^g_p[1]: replan with P^g - p
             self.stalls = 0
-            return PlanRequest(xy, self.goal.copy(), replan_horizon(
-                c.horizon, self.iteration, xy, self.goal, c.replan_spacing), "waypoint")
+            return PlanRequest(xy, self.goal.copy(), self._horizon(xy), "waypoint")
         timeout = c.replan_timeout * 2 ** min(self.stalls, MAX_STALL_DOUBLINGS)
         if c.replan_timeout > 0 and now - self._last_plan > timeout:
             self._last_plan = now  # one timeout replan per period even if planning fails
             self.stalls, self.stall_timeout = self.stalls + 1, timeout
-            return PlanRequest(xy, self.goal.copy(), horizon, "timeout")
+            return PlanRequest(xy, self.goal.copy(), self._horizon(xy), "timeout")
         return None
+
+    def _horizon(self, xy: np.ndarray) -> int:
+        """The horizon of a re-plan from ``xy`` (2,) [m] now (:func:`replan_horizon`)."""
+        c = self.config
+        return replan_horizon(c.horizon, self.iteration, xy, self.goal, c.replan_spacing)
 
     def accept(self, waypoints: np.ndarray, now: float, *, hold: bool = False) -> None:
         """The plan (P, 2) [m] made for the last request; ``hold``: follow it to the goal with

@@ -11,7 +11,6 @@ Selection rules for the best of N candidates t^{g,(i)} (Sec. III-A):
 """
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field, replace
 
@@ -19,7 +18,7 @@ import numpy as np
 import torch
 
 from ecahd_core.errors import EcahdError
-from ecahd_core.navigation import REPLAN_POLICIES, replan_horizon
+from ecahd_core.navigation import REPLAN_POLICIES, check_replan_spacing, replan_horizon
 
 SELECTION_RULES = ("shortest_reaching", "collision_aware")
 
@@ -511,11 +510,7 @@ class HierarchicalPlanner:
                  replan_spacing: float | None = None) -> None:
         if replan not in REPLAN_POLICIES:
             raise EcahdError(f"replan policy {replan!r} is not one of {list(REPLAN_POLICIES)}")
-        if replan_spacing is not None and not (math.isfinite(replan_spacing)
-                                               and replan_spacing > 0):
-            raise EcahdError(f"replan_spacing must be None (off) or a finite number > 0 m, "
-                             f"got {replan_spacing}")
-        self.replan, self.replan_spacing = replan, replan_spacing
+        self.replan, self.replan_spacing = replan, check_replan_spacing(replan_spacing)
         self.exact_check = exact_check
         from ecahd_core.cost import CostConfig
         from ecahd_core.diffusion import DiffusionSampler, SamplerConfig

@@ -39,9 +39,9 @@ SWEEP_SPACING = 0.25  # [m] between footprint outlines drawn along the path
 
 def add_replan_argument(p: argparse.ArgumentParser, default: str = "every_waypoint",
                         warm_fraction: float = 0.0) -> None:
-    """``--replan`` and ``--warm-fraction``: HD / ECAHD's SD policy (HierarchicalPlanner's
-    ``replan``, SparseConfig's ``warm_fraction``), one definition for ``ecahd plan`` and
-    ``ecahd bench planning``."""
+    """``--replan``, ``--warm-fraction`` and ``--replan-spacing``: HD / ECAHD's SD policy
+    (HierarchicalPlanner's ``replan`` and ``replan_spacing``, SparseConfig's ``warm_fraction``),
+    one definition for ``ecahd plan`` and ``ecahd bench planning``."""
     from ecahd_core.planner import REPLAN_POLICIES
 
     p.add_argument("--replan", default=default, choices=REPLAN_POLICIES,
@@ -55,7 +55,6 @@ def add_replan_argument(p: argparse.ArgumentParser, default: str = "every_waypoi
                         "waypoints (at most P^g) for the straight distance D left to the goal, "
                         "instead of Algorithm 1's P^g - p (ours; 0: off; default: by the map, "
                         "3 m on maps over 50 000 cells, off on smaller ones)")
-
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -119,7 +118,6 @@ def run(args: argparse.Namespace) -> int:
     from ecahd_core.astar import clearance_for_footprint, path_length, planner_for
     from ecahd_core.collision import check_collision
     from ecahd_core.dataset import resample_by_arclength
-    from ecahd_core.navigation import replan_spacing_for
     from ecahd_core.footprint import make_footprint
     from ecahd_core.maps import load_map
     from ecahd_core.viz import save_figures
@@ -195,8 +193,7 @@ def run(args: argparse.Namespace) -> int:
             "timings_ms": timings, "dd_calls": dd_calls, **counts,
             "replan": args.replan if args.method in ("ecahd", "hd") else None,
             "warm_fraction": args.warm_fraction if args.method in ("ecahd", "hd") else None,
-            "replan_spacing": (replan_spacing_for(grid, args.replan_spacing)
-                               if args.method in ("ecahd", "hd") else None),
+            "replan_spacing": hd.replan_spacing if hd is not None else None,
             "precision": (resolve_precision(args.precision)
                           if args.method in ("ecahd", "hd", "sd") else None),
             "safety_net": bool(args.safety_net), "rule": rule,
