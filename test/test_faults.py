@@ -33,6 +33,7 @@ from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped, Twist  # n
 from nav_msgs.msg import OccupancyGrid, Odometry, Path  # noqa: E402
 from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.qos import QoSProfile  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
 
@@ -47,9 +48,13 @@ WEST, EAST = (1.5, Y), (6.5, Y)
 REALTIME_FACTOR = 2.0
 CONTROL_TIMEOUT = 0.5  # [s sim] sim_bridge's
 CONTROL_RATE = 20.0  # [Hz] the process graph's refiner (its default)
-# [s sim] slack on "stopped within control_timeout": sim steps (0.02 s) and the interleaving of
-# the odom and cmd_vel streams in this process
+# [s sim] slack on "stopped within control_timeout": sim steps (0.02 s) and the refiner's /clock,
+# which lags the simulator's by a message
 STOP_MARGIN = 0.2
+# the probe's queues: deep enough that a probe busy for seconds (killing a process, a loaded CI
+# machine) still gets every odom and timing record, so it judges by their stamps, not by when it
+# happened to read them (a depth of 10 once made a robot that had stopped in time look 1.8 s late)
+PROBE_QOS = QoSProfile(depth=2000)
 
 
 def finite(*values) -> bool:
@@ -93,16 +98,16 @@ class ProcessGraph:
         rclpy.init(context=self.context, domain_id=ROS_DOMAIN_ID)
         self.probe = rclpy.create_node("fault_probe", context=self.context)
         self.odom = None  # (x, y, yaw, v, w, t [s sim])
-        self.last_cmd_t = None  # [s sim] the latest odom time when a cmd_vel arrived
+        self.odom_log = []  # every odom, in order
         self.cmds = 0
         self.plans = []  # (monotonic time, (N, 2))
         self.control_stamps = []  # [s sim] the refiner's control ticks
         self.refiner_ready = False
         self.bad = []  # non-finite numbers seen
-        self.probe.create_subscription(Odometry, "odom", self._on_odom, STREAM_QOS)
-        self.probe.create_subscription(Twist, "cmd_vel", self._on_cmd, STREAM_QOS)
+        self.probe.create_subscription(Odometry, "odom", self._on_odom, PROBE_QOS)
+        self.probe.create_subscription(Twist, "cmd_vel", self._on_cmd, PROBE_QOS)
         self.probe.create_subscription(Path, "plan", self._on_plan, PLAN_QOS)
-        self.probe.create_subscription(String, "ecahd/timing", self._on_timing, STREAM_QOS)
+        self.probe.create_subscription(String, "ecahd/timing", self._on_timing, PROBE_QOS)
         self.goal_pub = self.probe.create_publisher(PoseStamped, "goal_pose", STREAM_QOS)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.probe)
@@ -117,12 +122,12 @@ class ProcessGraph:
         t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
         self.odom = (pose.position.x, pose.position.y, yaw_from_quaternion(pose.orientation),
                      twist.linear.x, twist.angular.z, t)
+        self.odom_log.append(self.odom)
         if not finite(*pose_values(pose), twist.linear.x, twist.angular.z):
             self.bad.append(("odom", self.odom))
 
     def _on_cmd(self, msg) -> None:
         self.cmds += 1
-        self.last_cmd_t = self.odom[5] if self.odom else None
         if not finite(msg.linear.x, msg.angular.z):
             self.bad.append(("cmd_vel", (msg.linear.x, msg.angular.z)))
 
@@ -139,6 +144,24 @@ class ProcessGraph:
             self.refiner_ready = self.refiner_ready or bool(record.get("map_ready"))
 
     # processes
+    def ensure_up(self) -> None:
+        """Start again any node that an earlier test left killed or dead, so that one failing
+        test does not fail the ones after it."""
+        for name, proc in list(self.procs.items()):
+            if proc.proc.poll() is not None:
+                self.procs.pop(name).stop()
+        missing = [name for name in self.params if name not in self.procs]
+        if not missing:
+            return
+        for name in missing:
+            at = {}
+            if name == "sim_bridge" and self.odom is not None:
+                at = {"start_x": self.odom[0], "start_y": self.odom[1], "start_yaw": self.odom[2]}
+            self.start(name, **at)
+        self.refiner_ready, self.odom = False, None
+        self.spin_until(lambda: self.refiner_ready and self.odom is not None
+                        and self.goal_pub.get_subscription_count() > 0, "graph up", 60.0)
+
     def start(self, name: str, **overrides) -> None:
         self.starts += 1
         self.procs[name] = self.NodeProcess(name, {**self.params[name], **overrides},
@@ -215,10 +238,16 @@ class ProcessGraph:
 
 
 @pytest.fixture(scope="class")
-def graph(tmp_path_factory):
+def process_graph(tmp_path_factory):
     g = ProcessGraph(tmp_path_factory.mktemp("faults"))
     yield g
     g.close()
+
+
+@pytest.fixture
+def graph(process_graph):
+    process_graph.ensure_up()
+    return process_graph
 
 
 class TestProcessGraph:
@@ -229,12 +258,14 @@ class TestProcessGraph:
         goal = g.far_end()
         g.drive(goal)
         g.kill("local_refiner")
-        killed_t = g.odom[5]
         g.spin_until(lambda: g.odom[3] == 0.0 and g.odom[4] == 0.0, "the robot stops")
         stopped = g.odom
-        # sim_bridge's control_timeout stopped it: its last cmd_vel came at or before the kill
-        assert stopped[5] - g.last_cmd_t <= CONTROL_TIMEOUT + STOP_MARGIN, (stopped, g.last_cmd_t)
-        assert stopped[5] - killed_t <= CONTROL_TIMEOUT + STOP_MARGIN, (stopped, killed_t)
+        # sim_bridge's control_timeout stopped it: judged by stamps, from the killed refiner's
+        # last control tick (its last cmd_vel) to the first odom standing still after it
+        last_tick = g.control_stamps[-1]
+        stopped_t = next(o[5] for o in g.odom_log
+                         if o[5] > last_tick and o[3] == 0.0 and o[4] == 0.0)
+        assert stopped_t - last_tick <= CONTROL_TIMEOUT + STOP_MARGIN, (stopped_t, last_tick)
         cmds = g.cmds
         g.spin_until(lambda: g.odom[5] >= stopped[5] + 0.5, "0.5 s of sim time standing")
         assert g.odom[:2] == stopped[:2] and g.cmds == cmds  # stays put, nobody commands
@@ -287,7 +318,8 @@ class TestProcessGraph:
                      "the last goal of the burst planned", 5.0)
         g.spin_for(1.0)
         # the refiner's ticks in sim time: at rate, and never a gap that would let sim_bridge's
-        # control_timeout stop the robot (single late ticks happen on two busy cores)
+        # control_timeout stop the robot. (With a 10-deep timing queue this once failed on a gap
+        # of 0.6 s: records the probe had not read in time were dropped, not ticks missed.)
         gaps = np.diff(g.control_stamps[ticks_before:])
         period = 1.0 / CONTROL_RATE
         assert len(gaps) > 10 and np.median(gaps) <= 1.5 * period and \
@@ -314,7 +346,10 @@ class TestProcessGraph:
 
     def test_a_goal_after_a_simulator_restart_is_planned(self, graph):
         g = graph
-        if not g.odom_before_restart[5] - g.odom[5] > 10.0:
+        before = getattr(g, "odom_before_restart", None)
+        if before is None:
+            pytest.skip("the simulator was not restarted")
+        if not before[5] - g.odom[5] > 10.0:
             pytest.skip("the sim clock went back by less than 10 s")
         goal = g.far_end()
         since = time.monotonic()
