@@ -779,6 +779,15 @@ def median_spacing(lengths, sparse_horizon: int) -> float:
     return float(np.median(np.asarray(lengths, dtype=np.float64))) / (sparse_horizon - 1)
 
 
+def expert_spacing(dataset: "ExpertDataset") -> float:
+    """[m] the median waypoint spacing of a dataset's expert paths with its P^g waypoints
+    (:func:`median_spacing` of the lengths of its ``full`` views): how far apart the waypoints
+    SD learnt lie."""
+    full = np.asarray(dataset.full, dtype=np.float64)
+    lengths = np.linalg.norm(np.diff(full, axis=1), axis=-1).sum(axis=1)
+    return median_spacing(lengths, int(dataset.params["sparse_horizon"]))
+
+
 def waypoint_rule(dataset: "ExpertDataset") -> str:
     """The sparse views' rule a dataset was written with ("arclength" when not recorded)."""
     return str(dataset.params.get("waypoints", "arclength"))

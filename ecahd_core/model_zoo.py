@@ -145,8 +145,12 @@ def training_arrays(kind: str, dataset) -> dict[int, np.ndarray]:
 
 def model_meta(kind: str, dataset) -> dict[str, Any]:
     """Identity recorded in a checkpoint and checked when it is loaded (plus the DDIM step
-    count to sample it with)."""
-    return {
+    count to sample it with, and for SD the expert's waypoint spacing,
+    :func:`~ecahd_core.dataset.expert_spacing`, which sets the re-plan spacing on buildings)."""
+    from ecahd_core.dataset import expert_spacing
+
+    spacing = {"expert_spacing": round(expert_spacing(dataset), 4)} if kind == "sd" else {}
+    return {**spacing,
         "sample_steps": int(recipe(kind).sample_steps),
         "map_name": dataset.map_name,
         "map_fingerprint": dataset.map_fingerprint,

@@ -42,7 +42,7 @@ from ecahd_core.errors import EcahdError, PlanningError
 log = logging.getLogger("ecahd.navigation")
 
 REPLAN_POLICIES = ("every_waypoint", "once")
-REPLAN_SPACING = 3.0  # [m] the replan spacing chosen by a big map (auto_replan_spacing)
+REPLAN_SPACING = 3.0  # [m] the least replan spacing chosen on a big map (auto_replan_spacing)
 COORDINATE_LIMIT = 1e6  # [m] |x|, |y| beyond this is absurd whatever the map
 MAX_PLAN_POINTS = 100_000  # a plan with more poses is rejected
 PLAN_MARGIN = 1.0  # [m] plan points may lie this far outside the map's bounds
@@ -50,20 +50,29 @@ SIMPLIFY_TOLERANCE = 0.005  # [m] interior plan points this close to the chord a
 WAITING_END_DISTANCE = 0.05  # [m] at the end of the local plan with nothing next: stop
 
 
-def auto_replan_spacing(grid) -> float | None:
-    """[m] the replan spacing (:func:`replan_horizon`) chosen by the map: REPLAN_SPACING on maps
-    over ``astar.COARSE_ABOVE_CELLS`` cells (buildings), None (Algorithm 1's P^g - p) on
-    smaller ones, so maze2d-large keeps the paper's rule."""
+def auto_replan_spacing(grid, expert_spacing: float | None = None) -> float | None:
+    """[m] the replan spacing (:func:`replan_horizon`) chosen by the map and the SD model: on
+    maps over ``astar.COARSE_ABOVE_CELLS`` cells (buildings) the model's ``expert_spacing``
+    (``SparseDiffusion.expert_spacing``, the median spacing of the waypoints it learnt), at
+    least REPLAN_SPACING; None (Algorithm 1's P^g - p) on smaller maps, so maze2d-large keeps
+    the paper's rule.
+
+    Measured (docs/RESULTS.md): 3 m fits the warehouses (expert spacing 2.6-2.7 m); on the
+    60 x 60 m office (6.5 m) 3 m asked for twice the waypoints SD learnt and 6.5 m beat it on
+    ECAHD alone, fallbacks and time."""
     from ecahd_core.astar import COARSE_ABOVE_CELLS
 
-    return REPLAN_SPACING if grid.width * grid.height > COARSE_ABOVE_CELLS else None
+    if grid.width * grid.height <= COARSE_ABOVE_CELLS:
+        return None
+    return max(REPLAN_SPACING, expert_spacing or 0.0)
 
 
-def replan_spacing_for(grid, value: float | None) -> float | None:
-    """A replan-spacing setting [m] as the commands take it: None by the map
+def replan_spacing_for(grid, value: float | None,
+                       expert_spacing: float | None = None) -> float | None:
+    """A replan-spacing setting [m] as the commands take it: None by the map and the model
     (:func:`auto_replan_spacing`), 0 off, else ``value``."""
     if value is None:
-        return auto_replan_spacing(grid)
+        return auto_replan_spacing(grid, expert_spacing)
     if not (math.isfinite(value) and value >= 0):
         raise EcahdError(f"replan spacing must be >= 0 m (0: off), got {value}")
     return value or None

@@ -177,6 +177,10 @@ class SparseDiffusion:
                              "(costmap, footprint points, CostConfig)")
         self.cost = cost
         self.placer = placer
+        # [m] the median spacing of the expert waypoints the model learnt (None: not recorded,
+        # checkpoints before 2026-12-03)
+        spacing = checkpoint.meta.get("expert_spacing")
+        self.expert_spacing = float(spacing) if spacing else None
 
     def plan(self, start, goal, *, horizon: int | None = None,
              generator: torch.Generator | None = None, warm_start=None,

@@ -137,7 +137,9 @@ PARAMETERS = [
                                       "straight distance D left to the goal, instead of "
                                       "Algorithm 1's P^g - p, whose last plan is a straight "
                                       "line to the goal wherever the robot is; -1 = by the "
-                                      "map: 3.0 on maps over 50 000 cells, else off; 0 = off"),
+                                      "map and model: on maps over 50 000 cells the SD "
+                                      "model's expert waypoint spacing, at least 3.0, else "
+                                      "off; 0 = off"),
     ParamSpec("replan_timeout", 5.0, "[s] sd: with no waypoint reached for this long, replan "
                                      "from the current pose (same horizon); doubles with each "
                                      "further such replan (at most 8x) until a waypoint is "
@@ -215,14 +217,15 @@ class GlobalPlannerParams:
         require(0.0 <= self.warm_fraction <= 1.0, "warm_fraction", self.warm_fraction,
                 "in 0..1 (0: off)")
 
-    def runner_config(self, grid=None) -> GlobalRunnerConfig:
-        """The runner's settings; ``replan_spacing`` -1 is decided by ``grid`` (off without
-        one, before the map arrives)."""
+    def runner_config(self, grid=None, expert_spacing: float | None = None
+                      ) -> GlobalRunnerConfig:
+        """The runner's settings; ``replan_spacing`` -1 is decided by ``grid`` and the SD
+        model's ``expert_spacing`` [m] (off without a grid, before the map arrives)."""
         from ecahd_core.navigation import auto_replan_spacing
 
         spacing = self.replan_spacing or None
         if spacing == -1:
-            spacing = auto_replan_spacing(grid) if grid is not None else None
+            spacing = auto_replan_spacing(grid, expert_spacing) if grid is not None else None
         # the baselines plan one whole path per goal
         return GlobalRunnerConfig(horizon=self.horizon, waypoint_tolerance=self.waypoint_tolerance,
                                   replan_timeout=self.replan_timeout if self.method == "sd" else 0,
@@ -362,7 +365,8 @@ class GlobalPlanner(Node):
         else:
             fd = self._build_fd(grid)
         self.grid, self.sparse, self.astar, self.fd = grid, sparse, astar, fd
-        self.runner.config = p.runner_config(grid)  # replan_spacing may depend on the map
+        # replan_spacing may depend on the map and the model
+        self.runner.config = p.runner_config(grid, sparse.expert_spacing if sparse else None)
         from ecahd_core.sensing import ObstacleMemory
 
         self.memory = ObstacleMemory(grid, p.obstacle_memory)

@@ -55,7 +55,8 @@ def main() -> None:
     hd = HierarchicalPlanner(sd, load_model("dd", grid, footprint=fp), costmap=cost[0],
                              footprint_points=cost[1], cost_config=cost[2], dense=DenseConfig(),
                              exact_check=exact_check_for(grid, fp),
-                             replan_spacing=replan_spacing_for(grid, args.replan_spacing))
+                             replan_spacing=replan_spacing_for(grid, args.replan_spacing,
+                                                               sd.expert_spacing))
     net = SafetyNet(grid, fp, planner=hd, astar=planner_for(grid, clearance_for_footprint(fp)))
     gen, net_gen = torch.Generator().manual_seed(0), torch.Generator().manual_seed(1)
     drawn, colliding = [], 0

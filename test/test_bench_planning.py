@@ -87,3 +87,10 @@ def test_warm_fraction_reaches_hd_and_is_reported():
     assert r.context["warm_fraction"] == 0.3 and len(r.cells) == 2
     assert "warm-started at 0.3 of the schedule" in format_markdown(r)
     assert PlanningBenchSettings().warm_fraction == 0.0  # from noise unless asked
+
+
+def test_replan_spacing_is_reported_per_robot_when_the_models_differ():
+    from ecahd_core.bench.planning import _spacing_text
+
+    assert _spacing_text(3.0) == "3 m"
+    assert _spacing_text({"circle": 6.5, "quadruped": None}) == "robot (circle 6.5 m, quadruped off)"

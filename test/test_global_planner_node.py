@@ -305,7 +305,7 @@ def test_astar_from_a_pose_without_clearance_and_an_unreachable_goal(rig):
     assert len(r.plans) == 1 and r.planner.goal is None
 
 
-def test_replan_spacing_is_decided_by_the_map():
+def test_replan_spacing_is_decided_by_the_map_and_the_model():
     from types import SimpleNamespace
 
     from ecahd_core.navigation import REPLAN_SPACING
@@ -314,11 +314,15 @@ def test_replan_spacing_is_decided_by_the_map():
     params = GlobalPlannerParams(**values)
     big, small = SimpleNamespace(width=1000, height=1667), SimpleNamespace(width=120, height=90)
     assert params.runner_config(big).replan_spacing == REPLAN_SPACING  # a building
+    # the SD model's expert spacing where it is wider (an office's 6.5 m), never below 3 m
+    assert params.runner_config(big, 6.5).replan_spacing == 6.5
+    assert params.runner_config(big, 2.6).replan_spacing == REPLAN_SPACING
     assert params.runner_config(small).replan_spacing is None  # maze2d-large: the paper's
+    assert params.runner_config(small, 6.5).replan_spacing is None
     assert params.runner_config().replan_spacing is None  # no map yet
     for value, want in ((0.0, None), (2.5, 2.5)):
         values["replan_spacing"] = value
-        assert GlobalPlannerParams(**values).runner_config(big).replan_spacing == want
+        assert GlobalPlannerParams(**values).runner_config(big, 6.5).replan_spacing == want
 
 
 def test_bad_method_is_named():

@@ -50,6 +50,21 @@ def test_meta_records_identity(umaze_data):
     meta = model_meta("sd", ds)
     assert meta["map_name"] == "maze2d-umaze" and meta["dataset_sha256"] == ds.sha256
     assert meta["clearance"] == pytest.approx(0.4) and meta["sample_steps"] == RECIPES["sd"].sample_steps
+    # SD records how far apart the expert's waypoints lie: median path length / (P^g - 1)
+    lengths = np.linalg.norm(np.diff(ds.full, axis=1), axis=-1).sum(axis=1)
+    assert meta["expert_spacing"] == pytest.approx(
+        np.median(lengths) / (ds.params["sparse_horizon"] - 1), abs=1e-4)
+    assert "expert_spacing" not in model_meta("dd", ds)
+
+
+def test_sd_reads_its_expert_spacing(tiny_sd):
+    from ecahd_core.planner import SparseDiffusion
+
+    out, _ = tiny_sd
+    ckpt = load_model("sd", builtin_map("maze2d-umaze"), path=out)
+    assert SparseDiffusion(ckpt).expert_spacing == pytest.approx(ckpt.meta["expert_spacing"])
+    ckpt.meta.pop("expert_spacing")  # a checkpoint from before it was recorded
+    assert SparseDiffusion(ckpt).expert_spacing is None
 
 
 def test_train_command_writes_full_and_shipped_checkpoints(tiny_sd):

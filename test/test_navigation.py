@@ -42,6 +42,22 @@ def test_replan_horizon_shrinks_with_the_distance_left_when_spaced():
     assert replan_horizon(10, 2, S, (3.0, 0.0), 3.0) == 8  # never below P^g - p
 
 
+def test_replan_spacing_by_the_map_and_the_model():
+    from types import SimpleNamespace
+
+    from ecahd_core.navigation import REPLAN_SPACING, auto_replan_spacing, replan_spacing_for
+
+    big, small = SimpleNamespace(width=1000, height=1667), SimpleNamespace(width=120, height=90)
+    assert auto_replan_spacing(small, 6.5) is None  # maze2d-large: Algorithm 1's rule
+    assert auto_replan_spacing(big) == REPLAN_SPACING  # a model without a recorded spacing
+    assert auto_replan_spacing(big, 2.6) == REPLAN_SPACING  # never below 3 m
+    assert auto_replan_spacing(big, 6.5) == 6.5  # the office's expert spacing
+    assert replan_spacing_for(big, None, 6.5) == 6.5
+    assert replan_spacing_for(big, 0.0, 6.5) is None and replan_spacing_for(big, 4.0, 6.5) == 4.0
+    with pytest.raises(EcahdError, match="replan spacing"):
+        replan_spacing_for(big, -1.0, 6.5)
+
+
 def test_a_spaced_runner_asks_for_the_horizon_the_distance_needs():
     r = GlobalRunner(GlobalRunnerConfig(horizon=4, waypoint_tolerance=0.3, replan_spacing=0.5))
     r.set_goal((2.0, 1.0))

@@ -186,7 +186,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
     grid = load_map(settings.map)
     place_reach = (auto_reach(grid) if settings.place_reach is None  # what "auto" chose
                    else settings.place_reach)
-    replan_spacing = replan_spacing_for(grid, settings.replan_spacing)
+    spacings = {}  # robot -> the re-plan spacing its ECAHD cells used [m] (None: off)
     problems = make_problems(grid, settings.problems, seed=settings.seed)
     cells, ablation, examples = [], [], {}
     astars = {}  # robot -> AStarPlanner: one clearance mask per map and robot, reused
@@ -221,6 +221,8 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
             if method == "sd":
                 plan_fn = lambda s, g: (sd.plan(s, g, generator=gen).waypoints, None)  # noqa: E731
             else:
+                spacings[robot] = replan_spacing_for(grid, settings.replan_spacing,
+                                                     sd.expert_spacing)
                 hd = HierarchicalPlanner(sd, load_model("dd", grid, footprint=fp),
                                          costmap=cost[0], footprint_points=cost[1],
                                          cost_config=cost[2], dense=DenseConfig(
@@ -231,7 +233,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                                              polish_steps=settings.polish_steps,
                                              keep_better=settings.keep_better),
                                          replan=settings.replan,
-                                         replan_spacing=replan_spacing,
+                                         replan_spacing=spacings[robot],
                                          exact_check=(exact_check_for(grid, fp)
                                                       if settings.exact_rule and not variant
                                                       else None))
@@ -309,7 +311,9 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                "dd_retries": settings.dd_retries, "polish_steps": settings.polish_steps,
                "keep_better": settings.keep_better, "exact_rule": settings.exact_rule,
                "replan": settings.replan, "warm_fraction": settings.warm_fraction,
-               "replan_spacing": replan_spacing,
+               # one number when every robot's model asked for the same, else per robot
+               "replan_spacing": (next(iter(spacings.values()))
+                                  if len(set(spacings.values())) == 1 else spacings or None),
                "max_spacing": settings.max_spacing, "place_reach": place_reach,
                "safety_net": settings.safety_net, "net_retries": settings.net_retries,
                "net_resamples": settings.net_resamples,
@@ -321,6 +325,14 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
 
 def _fmt(v, nd=1):
     return "–" if v is None else f"{v:.{nd}f}"
+
+
+def _spacing_text(spacing) -> str:
+    """The context's replan_spacing, one number or {robot: number or None}, as text."""
+    if isinstance(spacing, dict):
+        return "robot (" + ", ".join(f"{robot} {'off' if v is None else f'{v:g} m'}"
+                                     for robot, v in spacing.items()) + ")"
+    return f"{spacing:g} m"
 
 
 def format_markdown(r: PlanningBenchResult) -> str:
@@ -342,8 +354,8 @@ def format_markdown(r: PlanningBenchResult) -> str:
              f"SD replanning {c['replan']}"
              + (f" warm-started at {c['warm_fraction']:g} of the schedule"
                 if c.get("warm_fraction") and c["replan"] == "every_waypoint" else "")
-             + (f", re-plans keep a waypoint per {c['replan_spacing']:g} m left to the goal"
-                if c.get("replan_spacing") and c["replan"] == "every_waypoint" else "")
+             + (f", re-plans keep a waypoint per {_spacing_text(c['replan_spacing'])} left to "
+                "the goal" if c.get("replan_spacing") and c["replan"] == "every_waypoint" else "")
              + (f", waypoints at most {c['max_spacing']:g} m apart (SD re-samples longer legs)"
                 if c.get("max_spacing") else "")
              + (f", SD's waypoints in walls placed in free space within {c['place_reach']:g} m "

@@ -53,8 +53,9 @@ def add_replan_argument(p: argparse.ArgumentParser, default: str = "every_waypoi
     p.add_argument("--replan-spacing", type=float, default=None, metavar="M",
                    help="[m] HD every_waypoint: each SD re-plan keeps at least ceil(D / M) + 1 "
                         "waypoints (at most P^g) for the straight distance D left to the goal, "
-                        "instead of Algorithm 1's P^g - p (ours; 0: off; default: by the map, "
-                        "3 m on maps over 50 000 cells, off on smaller ones)")
+                        "instead of Algorithm 1's P^g - p (ours; 0: off; default: by the map and "
+                        "model, on maps over 50 000 cells the SD model's expert waypoint "
+                        "spacing, at least 3 m; off on smaller ones)")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -281,7 +282,8 @@ def _plan_diffusion(args, grid, footprint, start, goal):
     hd = HierarchicalPlanner(sd, load_model("dd", grid, path=args.dd_model, footprint=footprint),
                              costmap=cost[0], footprint_points=cost[1], cost_config=cost[2],
                              dense=DenseConfig(guidance=guided, **polish), replan=args.replan,
-                             replan_spacing=replan_spacing_for(grid, args.replan_spacing),
+                             replan_spacing=replan_spacing_for(grid, args.replan_spacing,
+                                                               sd.expert_spacing),
                              exact_check=(None if args.no_exact_rule
                                           else exact_check_for(grid, footprint)))
     hd.plan(start, goal, generator=gen())  # warm-up
