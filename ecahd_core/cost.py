@@ -42,7 +42,7 @@ from functools import lru_cache
 
 import torch
 
-from ecahd_core.costmap import DEFAULT_DILATION, DEFAULT_MARGIN, CostMap
+from ecahd_core.costmap import DEFAULT_DILATION, DEFAULT_MARGIN, CostMap, auto_margin
 from ecahd_core.errors import EcahdError, FootprintError, TrajectoryError
 from ecahd_core.maps import GridMap
 
@@ -85,6 +85,14 @@ class CostConfig:
                 bound = ">= 0" if zero_ok else "> 0"
                 raise EcahdError(f"{name} must be a finite number {bound}, got {value!r}")
 
+    @classmethod
+    def for_map(cls, grid, **kwargs) -> "CostConfig":
+        """A config whose margin is chosen by ``grid`` (:func:`~ecahd_core.costmap.auto_margin`)
+        unless ``kwargs`` give one (``margin=None`` also means by the map)."""
+        if kwargs.get("margin") is None:
+            kwargs["margin"] = auto_margin(grid)
+        return cls(**kwargs)
+
     def cost_kwargs(self) -> dict:
         """The keyword arguments of :func:`trajectory_cost` taken from this config."""
         return dict(mode=self.mode, n_interp=self.n_interp, sigma_dist=self.sigma_dist,
@@ -118,8 +126,10 @@ class CollisionCost:
 
     @classmethod
     def build(cls, grid: GridMap, footprint, config: CostConfig | None = None) -> "CollisionCost":
-        """From a GridMap and a :class:`~ecahd_core.footprint.Footprint` (its ``points``)."""
-        config = config or CostConfig()
+        """From a GridMap and a :class:`~ecahd_core.footprint.Footprint` (its ``points``);
+        ``config`` None: the defaults with the margin chosen by the map
+        (:meth:`CostConfig.for_map`)."""
+        config = config or CostConfig.for_map(grid)
         points = torch.as_tensor(footprint.points, dtype=torch.float32).contiguous()
         return cls(costmap=config.make_costmap(grid), footprint_points=points, config=config)
 

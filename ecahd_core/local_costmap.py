@@ -371,7 +371,8 @@ class LocalCostmap:
                 ``cost_config`` and remembered) or as a :class:`CostMap` built by
                 :meth:`CostMap.from_grid` (its occupancy is read back from the cost: a cell is
                 occupied where cost > (margin + dilation) / margin, i.e. sdf < 0).
-            cost_config: margin and dilation [m]; default CostConfig() with a GridMap; with a
+            cost_config: margin and dilation [m]; default ``CostConfig.for_map`` (the margin
+                chosen by the map) with a GridMap; with a
                 CostMap it may be omitted, and must agree with it if given.
 
         Returns:
@@ -379,7 +380,7 @@ class LocalCostmap:
             dtype and device; ``static``'s own cost map when no mark lies on it.
         """
         if isinstance(static, GridMap):
-            cfg = cost_config or CostConfig()
+            cfg = cost_config or CostConfig.for_map(static)
             base = self._static_costmap(static, cfg)
 
             def occupied_of(rows, cols):

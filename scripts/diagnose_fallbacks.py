@@ -48,7 +48,7 @@ def main() -> None:
     args = ap.parse_args()
     torch.set_num_threads(1)
     grid, fp = load_map(args.map), make_footprint(args.robot)
-    cost = CollisionCost.build(grid, fp, CostConfig()).as_tuple()
+    cost = CollisionCost.build(grid, fp, CostConfig.for_map(grid)).as_tuple()
     sd = SparseDiffusion(load_model("sd", grid, footprint=fp),
                          SparseConfig(selection="collision_aware", precision="auto"), cost=cost,
                          placer=placer_for(grid, fp, None))

@@ -56,7 +56,7 @@ def main() -> None:
     args = ap.parse_args()
     torch.set_num_threads(1)
     grid, fp = load_map(args.map), make_footprint(args.robot)
-    cost = CollisionCost.build(grid, fp, CostConfig()).as_tuple()
+    cost = CollisionCost.build(grid, fp, CostConfig.for_map(grid)).as_tuple()
     sd = SparseDiffusion(load_model("sd", grid, footprint=fp),
                          SparseConfig(num_candidates=args.candidates, selection=args.selection,
                                       max_spacing=args.max_spacing), cost=cost,

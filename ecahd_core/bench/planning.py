@@ -79,7 +79,7 @@ class PlanningBenchSettings:
     selection: str = "collision_aware"  # ours; "shortest_reaching" is Sec. III-A's rule
     guidance_weight: float = 0.03  # DenseConfig's default
     guidance_space: str = "x0"  # DenseConfig's default
-    margin: float = 0.1
+    margin: float | None = None  # [m] the cost map's (None: by the map, costmap.auto_margin)
     c_th: float = 0.1
     dd_retries: int = 0
     polish_steps: int = 30  # DenseConfig's default; 0 = the paper's Algorithm 1
@@ -186,6 +186,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
     grid = load_map(settings.map)
     place_reach = (auto_reach(grid) if settings.place_reach is None  # what "auto" chose
                    else settings.place_reach)
+    margin = CostConfig.for_map(grid, margin=settings.margin).margin
     spacings = {}  # robot -> the re-plan spacing its ECAHD cells used [m] (None: off)
     problems = make_problems(grid, settings.problems, seed=settings.seed)
     cells, ablation, examples = [], [], {}
@@ -198,7 +199,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
 
     def run_cell(method, guidance, robot, cost_config=None, variant=""):
         fp = make_footprint(robot)
-        cost = CollisionCost.build(grid, fp, cost_config or CostConfig(margin=settings.margin)
+        cost = CollisionCost.build(grid, fp, cost_config or CostConfig(margin=margin)
                                    ).as_tuple()
         gen = torch.Generator().manual_seed(settings.sample_seed)
         net = None
@@ -298,7 +299,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
         radius = _mf("circle").circumscribed_radius
         for mode in ("point", "line", "surface"):
             for dilation in (0.0, radius):
-                cc = CostConfig(mode=mode, dilation=dilation, margin=settings.margin)
+                cc = CostConfig(mode=mode, dilation=dilation, margin=margin)
                 variant = f"{mode}{' + dilation' if dilation else ''}"
                 cell, _ = run_cell("hd", True, "circle", cost_config=cc, variant=variant)
                 ablation.append(cell)
@@ -307,7 +308,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                "sample_seed": settings.sample_seed, "candidates": settings.candidates,
                "selection": settings.selection,
                "guidance_weight": settings.guidance_weight, "c_th": settings.c_th,
-               "guidance_space": settings.guidance_space, "margin": settings.margin,
+               "guidance_space": settings.guidance_space, "margin": margin,
                "dd_retries": settings.dd_retries, "polish_steps": settings.polish_steps,
                "keep_better": settings.keep_better, "exact_rule": settings.exact_rule,
                "replan": settings.replan, "warm_fraction": settings.warm_fraction,

@@ -191,7 +191,9 @@ def _add_planning_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--guidance-space", default=d.guidance_space, choices=("eps", "x0"),
                         help="where J is evaluated and how omega is scaled (diffusion.sampler)")
     parser.add_argument("--margin", type=float, default=d.margin,
-                        help="[m] cost-map margin: J is 0 farther than this from obstacles")
+                        help="[m] cost-map margin: J is 0 farther than this from obstacles "
+                             "(default: by the map, 0.5 m on maps over 50 000 cells, else "
+                             "0.1 m)")
     parser.add_argument("--c-th", type=float, default=d.c_th, help="DD trigger threshold")
     parser.add_argument("--dd-retries", type=_int_at_least(0), default=d.dd_retries,
                         help="our safety rule: resample DD while still colliding (0: paper)")
