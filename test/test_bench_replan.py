@@ -19,7 +19,10 @@ def test_bench_replan_measures_and_its_references_agree(tmp_path, capsys):
     data = json.loads(out.read_text())
     assert len(data["records"]) == 2
     for r in data["records"]:
-        assert r["cost_max_diff"] == 0.0 and r["crosses_agree"] and r["detour_agree"]
+        # the fused cost is the whole map's up to float32 rounding: cv2's distance transform
+        # on a window can round a distance one ulp apart from the whole map's (seen with the
+        # 0.5 m building margin: 8.9e-8)
+        assert r["cost_max_diff"] <= 1e-6 and r["crosses_agree"] and r["detour_agree"]
         assert r["judge_agree"] and r["judge_ms"] > 0
         assert r["remembered_cells"] > 0 and r["crosses"]  # the boxes lie on the route
         if r["detour_m"] is not None:
