@@ -150,7 +150,12 @@ class WaypointPlacer:
         """The free position among ``at + off`` ((K, 2) [m], nearest first) with the least
         LEG_WEIGHT x (wall length of the legs from ``prev`` and to ``nxt``) + distance from
         ``at``; None if no position is free, or (with ``need``) none makes the legs cross less
-        wall than ``need`` [m]."""
+        wall than ``need`` [m].
+
+        The score needs only the distance transform, so every candidate is scored first and the
+        exact checker (the cost: a polygon test per pose near walls) judges them in score order,
+        a chunk at a time, until one is free: the first free one is the argmin over the free
+        ones (ties: the nearest, as ``off`` is ordered)."""
         from ecahd_core.collision import DEFAULT_TOLERANCE
 
         cand = at + off
@@ -161,32 +166,43 @@ class WaypointPlacer:
             cand = cand[near > self.footprint.inscribed_radius]
         if len(cand) == 0:
             return None
-        d = cand - prev
-        heading = np.arctan2(d[:, 1], d[:, 0])  # facing along the incoming leg
-        depth = self.clearance.depths(np.column_stack([cand, heading]), self.footprint)
-        cand = cand[depth <= DEFAULT_TOLERANCE]
-        if len(cand) == 0:
-            return None
         walls = self.wall_length(prev, cand)
         if nxt is not None:
             walls = walls + self.wall_length(nxt, cand)
         score = LEG_WEIGHT * walls + np.linalg.norm(cand - at, axis=1)
-        k = int(np.argmin(score))  # argmin keeps the nearest among ties
-        if need is not None and not walls[k] < need:
-            return None
-        return cand[k]
+        order = np.argsort(score, kind="stable")  # stable: the nearest first among ties
+        start, chunk = 0, 16
+        while start < len(order):
+            idx = order[start:start + chunk]
+            d = cand[idx] - prev
+            heading = np.arctan2(d[:, 1], d[:, 0])  # facing along the incoming leg
+            depth = self.clearance.depths(np.column_stack([cand[idx], heading]),
+                                          self.footprint)
+            free = np.flatnonzero(depth <= DEFAULT_TOLERANCE)
+            if len(free):
+                k = int(idx[free[0]])
+                if need is not None and not walls[k] < need:
+                    return None
+                return cand[k]
+            start, chunk = start + chunk, chunk * 4
+        return None
 
     def wall_length(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """Length [m] of each straight leg from ``a`` (2,) to ``b`` (K, 2) where a circle of the
         footprint's inscribed radius may touch an occupied cell (the distance transform of cell
-        centres, less half a cell diagonal; samples one cell apart) -> (K,)."""
+        centres, less half a cell diagonal; each leg sampled at ceil(length / resolution) + 1
+        evenly spaced points, so a leg's value does not depend on the others) -> (K,)."""
         b = np.asarray(b, dtype=np.float64).reshape(-1, 2)
         length = np.linalg.norm(b - a, axis=1)  # (K,)
-        n = max(2, int(math.ceil(float(length.max(initial=0.0)) / self.grid.resolution)) + 1)
-        t = np.linspace(0.0, 1.0, n)
-        pts = a + t[None, :, None] * (b - a)[:, None, :]  # (K, n, 2)
+        counts = np.ceil(length / self.grid.resolution).astype(np.int64) + 1  # (K,) >= 1
+        counts = np.maximum(counts, 2)
+        n = int(counts.max(initial=2))
+        j = np.arange(n)[None, :]  # (1, n)
+        valid = j < counts[:, None]  # (K, n)
+        t = np.minimum(j / (counts[:, None] - 1), 1.0)  # (K, n)
+        pts = a + t[:, :, None] * (b - a)[:, None, :]  # (K, n, 2)
         near = self.clearance.wall_distance(pts.reshape(-1, 2)).reshape(len(b), n) < self._near
-        return near.mean(axis=1) * length
+        return (near & valid).sum(axis=1) / counts * length
 
 
 def headings(xy: np.ndarray) -> np.ndarray:

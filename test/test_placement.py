@@ -80,3 +80,38 @@ def test_placer_for_chooses_by_map_size_and_rejects_bad_reach():
         placer_for(small, robot, -1.0)
     with pytest.raises(EcahdError, match="reach"):
         WaypointPlacer(small, robot, reach=float("nan"))
+
+
+@pytest.mark.parametrize("robot", ["circle", "quadruped"])
+def test_best_judges_candidates_in_score_order_and_finds_the_argmin_over_free_ones(robot):
+    """_best scores every candidate on the distance transform and asks the exact checker only
+    in score order: its answer must be the argmin over all free candidates (ties: the nearest),
+    the answer of judging every candidate first."""
+    from ecahd_core.collision import DEFAULT_TOLERANCE
+    from ecahd_core.mapgen import MapGenConfig, generate
+    from ecahd_core.placement import LEG_WEIGHT
+
+    grid = generate(MapGenConfig("office", 16, 12, 0.05, 3)).grid
+    fp = make_footprint(robot)
+    placer = WaypointPlacer(grid, fp)
+    rng = np.random.default_rng(0)
+    lo, hi = np.array(grid.origin) + 0.5, np.array(grid.origin) + [15.5, 11.5]
+    found = 0
+    for _ in range(40):
+        prev, at, nxt = rng.uniform(lo, hi, size=(3, 2))
+        off = placer._within(placer.reach)
+        got = placer._best(at, off, prev, nxt)
+        cand = at + off
+        cand = cand[grid.in_bounds(cand)]  # the reference: every candidate judged
+        d = cand - prev
+        depth = placer.clearance.depths(np.column_stack([cand, np.arctan2(d[:, 1], d[:, 0])]),
+                                        fp)
+        cand = cand[depth <= DEFAULT_TOLERANCE]
+        if len(cand) == 0:
+            assert got is None
+            continue
+        score = (LEG_WEIGHT * (placer.wall_length(prev, cand) + placer.wall_length(nxt, cand))
+                 + np.linalg.norm(cand - at, axis=1))
+        np.testing.assert_allclose(got, cand[int(np.argmin(score))])
+        found += 1
+    assert found >= 20
