@@ -25,6 +25,8 @@ PLACE_REACH = 1.0  # [m] how far a waypoint in a wall may move (docs/RESULTS.md,
 PLACE_STEP = 0.05  # [m] candidate lattice (at least the map's resolution)
 LEG_WEIGHT = 4.0  # metres of displacement one metre of leg crossing a wall is worth
 LEG_ROUNDS = 3  # rounds of leg repair (a leg crossing a wall gets a placed midpoint)
+REPAIR_REACH = None  # [m] how far leg repair looks for a midpoint (None: ``reach``)
+REPAIR_CANDIDATES = 30  # lattice steps across a repair reach at most (a coarser step beyond)
 
 
 class WaypointPlacer:
@@ -36,10 +38,14 @@ class WaypointPlacer:
         reach: [m] the farthest a waypoint moves; one with no free position within reach stays.
         step: [m] spacing of the candidate positions (None: max(PLACE_STEP, resolution)).
         leg_rounds: rounds of :meth:`repair` after :meth:`place` (0: waypoints only).
+        repair_reach: [m] how far from a leg's middle :meth:`repair` looks for its new
+            waypoint (at most half the leg; None: ``reach``); its lattice step is at least
+            repair_reach / REPAIR_CANDIDATES.
     """
 
     def __init__(self, grid, footprint, *, reach: float = PLACE_REACH,
-                 step: float | None = None, leg_rounds: int = LEG_ROUNDS) -> None:
+                 step: float | None = None, leg_rounds: int = LEG_ROUNDS,
+                 repair_reach: float | None = REPAIR_REACH) -> None:
         from ecahd_core.sensing import StaticClearance
 
         if not (math.isfinite(reach) and reach > 0):
@@ -50,8 +56,14 @@ class WaypointPlacer:
         if leg_rounds < 0:
             raise EcahdError(f"leg_rounds must be >= 0, got {leg_rounds}")
         self.leg_rounds = int(leg_rounds)
+        self.repair_reach = self.reach if repair_reach is None else float(repair_reach)
+        if not (math.isfinite(self.repair_reach) and self.repair_reach > 0):
+            raise EcahdError(f"leg repair's reach must be a finite number > 0 m, "
+                             f"got {repair_reach}")
+        self._repair_step = max(self.step, self.repair_reach / REPAIR_CANDIDATES)
         self.clearance = StaticClearance(grid)
         self._offsets = self.lattice(self.reach)
+        self._offset_norms = np.linalg.norm(self._offsets, axis=1)
         # a circle of the inscribed radius centred on a cell centre this near an occupied cell
         # centre may overlap that cell (whose corner lies half a cell diagonal nearer)
         self._near = footprint.inscribed_radius + math.sqrt(0.5) * grid.resolution
@@ -63,18 +75,33 @@ class WaypointPlacer:
         xy, added = self.repair(xy)
         return xy, moved + added
 
-    def lattice(self, reach: float) -> np.ndarray:
-        """(K, 2) [m] offsets of a square lattice of ``step`` within ``reach``, nearest first."""
-        n = int(reach / self.step)
+    def lattice(self, reach: float, *, step: float | None = None) -> np.ndarray:
+        """(K, 2) [m] offsets of a square lattice of ``step`` (None: the placer's) within
+        ``reach``, nearest first."""
+        step = self.step if step is None else step
+        n = int(reach / step)
         off = np.stack(np.meshgrid(np.arange(-n, n + 1), np.arange(-n, n + 1)), -1)
-        off = off.reshape(-1, 2) * self.step
+        off = off.reshape(-1, 2) * step
         dist = np.linalg.norm(off, axis=1)
         keep = dist <= reach + 1e-9
         return off[keep][np.argsort(dist[keep], kind="stable")]
 
+    def _repair_lattice(self, reach: float) -> np.ndarray:
+        """The lattice leg repair searches within ``reach`` [m] (<= ``repair_reach``):
+        placement's own within ``reach``, or a coarser one for a wider repair reach."""
+        if self._repair_step <= self.step:
+            return self._within(reach)
+        if "_repair_offsets" not in self.__dict__:
+            off = self.lattice(self.repair_reach, step=self._repair_step)
+            self._repair_offsets, self._repair_norms = off, np.linalg.norm(off, axis=1)
+        return self._repair_offsets[:np.searchsorted(self._repair_norms, reach + 1e-9, "right")]
+
     def _within(self, reach: float) -> np.ndarray:
-        """:meth:`lattice` of ``reach`` (the one built for ``self.reach`` if it reaches as far)."""
-        return self._offsets if reach >= self.reach else self.lattice(reach)
+        """:meth:`lattice` of ``reach`` (a prefix of the one built for ``self.reach``: both are
+        ordered nearest first)."""
+        if reach >= self.reach:
+            return self._offsets
+        return self._offsets[:np.searchsorted(self._offset_norms, reach + 1e-9, "right")]
 
     def blocked(self, waypoints) -> np.ndarray:
         """(P, 2) [m] -> (P,) bool: the footprint placed at each waypoint, facing along its
@@ -131,8 +158,9 @@ class WaypointPlacer:
             for k in range(len(xy) - 1):
                 a, b = xy[k], xy[k + 1]
                 if walls[k] > 0:
-                    reach = min(self.reach, 0.5 * float(np.linalg.norm(b - a)))
-                    mid = self._best(0.5 * (a + b), self._within(reach), a, b, need=walls[k])
+                    reach = min(self.repair_reach, 0.5 * float(np.linalg.norm(b - a)))
+                    mid = self._best(0.5 * (a + b), self._repair_lattice(reach), a, b,
+                                     need=walls[k])
                     if mid is not None:
                         pieces.append(mid[None])
                         added += 1
