@@ -94,9 +94,9 @@ from ecahd_core.navigation import (REPLAN_POLICIES, SNAP_DISTANCE, GlobalRunner,
 from ecahd_core.planner import SELECTION_RULES, SparseConfig, SparseDiffusion, SparsePlan
 from ecahd_core.threads import PRECISION_CHOICES
 from ecahd_ros.conversions import msg_to_grid, timing_message, xy_to_path
-from ecahd_ros.params import (ParamSpec, declare_parameters, make_robot,
-                              read_parameters, require, require_non_negative, require_positive,
-                              shared)
+from ecahd_ros.params import (ParamSpec, collision_cost, declare_parameters, make_robot,
+                              read_parameters, require, require_cost_margin,
+                              require_non_negative, require_positive, shared)
 from ecahd_ros.qos import MAP_QOS, PLAN_QOS, STREAM_QOS, VIZ_QOS
 from ecahd_ros.spin import spin_node
 
@@ -126,7 +126,8 @@ PARAMETERS = [
     ParamSpec("epsilon", 1.0, "[m] goal-reaching radius of the best-of-N rule"),
     ParamSpec("selection", "collision_aware", f"best-of-N rule: {list(SELECTION_RULES)} "
                                               "(shortest_reaching: Sec. III-A's)"),
-    *shared("robot", "footprint", "footprint_padding", "global_frame", "clearance_margin"),
+    *shared("robot", "footprint", "footprint_padding", "global_frame", "clearance_margin",
+            "cost_margin"),
     ParamSpec("waypoint_tolerance", 0.3, "[m] reaching the next waypoint this close replans "
                                          "with horizon P^g - p (sd); the goal this close is "
                                          "reached"),
@@ -183,6 +184,7 @@ class GlobalPlannerParams:
     footprint_padding: float
     global_frame: str
     clearance_margin: float
+    cost_margin: float
     waypoint_tolerance: float
     replan: str
     replan_spacing: float
@@ -202,6 +204,7 @@ class GlobalPlannerParams:
                 self.inference_precision, f"one of {list(PRECISION_CHOICES)}")
         require_non_negative(self, "ddim_steps", "footprint_padding", "seed", "replan_timeout",
                              "obstacle_memory", "clearance_margin", "max_spacing", "leg_repair")
+        require_cost_margin(self)
         require(self.place_reach >= 0 or self.place_reach == -1, "place_reach",
                 self.place_reach, ">= 0 m, or -1 (by the map's size)")
         require(self.replan_spacing >= 0 or self.replan_spacing == -1, "replan_spacing",
@@ -385,24 +388,22 @@ class GlobalPlanner(Node):
             self._step()
 
     def _build_sd(self, grid) -> SparseDiffusion:
-        from ecahd_core.cost import CollisionCost
         from ecahd_core.model_zoo import load_model
 
         p = self.params
         ckpt = load_model("sd", grid, path=p.sd_model or None, footprint=self.footprint,
                           horizon=p.horizon)
-        cost = (CollisionCost.build(grid, self.footprint).as_tuple()
+        cost = (collision_cost(p, grid, self.footprint).as_tuple()
                 if p.selection == "collision_aware" else None)
         return SparseDiffusion(ckpt, p.sparse_config(), cost=cost)
 
     def _build_fd(self, grid):
-        from ecahd_core.cost import CollisionCost
         from ecahd_core.model_zoo import load_model
         from ecahd_core.planner import FullDiffusion
 
         p = self.params
         ckpt = load_model("fd", grid, path=p.fd_model or None, footprint=self.footprint)
-        cost = CollisionCost.build(grid, self.footprint).as_tuple() if p.fd_guidance else None
+        cost = collision_cost(p, grid, self.footprint).as_tuple() if p.fd_guidance else None
         return FullDiffusion(ckpt, guidance=p.fd_guidance, cost=cost,
                              num_steps=p.ddim_steps or None)
 

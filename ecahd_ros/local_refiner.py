@@ -84,16 +84,17 @@ from ecahd_core.sensing import PoseHistory
 from ecahd_core.worker import LatestWorker
 from ecahd_ros.conversions import (layout_to_msg, msg_to_grid, path_to_xy, timing_message,
                                    xy_to_path, yaw_from_quaternion)
-from ecahd_ros.params import (ParamSpec, declare_parameters, make_robot,
+from ecahd_ros.params import (ParamSpec, collision_cost, declare_parameters, make_robot,
                               on_parameter_change, read_parameters, require,
-                              require_non_negative, require_positive, shared)
+                              require_cost_margin, require_non_negative, require_positive,
+                              shared)
 from ecahd_ros.qos import MAP_QOS, PLAN_QOS, SCAN_QOS, STREAM_QOS, VIZ_QOS
 from ecahd_ros.spin import spin_node
 
 PARAMETERS = [
     ParamSpec("dd_model", "", "DD checkpoint path; '' = the shipped model for map_name"),
     *shared("map_name", "robot", "footprint", "footprint_padding", "global_frame",
-            "clearance_margin"),
+            "clearance_margin", "cost_margin"),
     ParamSpec("c_th", DenseConfig().c_th, "DD refines a local plan whose collision cost c^l "
                                           "exceeds this"),
     ParamSpec("dd_enabled", True, "run Dense Diffusion at all; false: follow the straight local "
@@ -200,6 +201,7 @@ class LocalRefinerParams:
     footprint_padding: float
     global_frame: str
     clearance_margin: float
+    cost_margin: float
     c_th: float
     dd_enabled: bool
     polish_steps: int
@@ -245,6 +247,7 @@ class LocalRefinerParams:
         require_positive(self, "control_rate", "max_v", "max_w", "max_accel", "lookahead",
                          "waypoint_tolerance", "goal_tolerance", "stale_timeout",
                          "torch_threads")
+        require_cost_margin(self)
         require_non_negative(self, "c_th", "footprint_padding", "plan_timeout", "seed",
                              "clearance_margin",
                              "polish_steps", "prepare_ahead", "obstacle_persistence",
@@ -447,7 +450,6 @@ class LocalRefiner(Node):
 
     def _build_world(self, grid) -> None:
         """(map worker) Everything the local stage needs on ``grid``, swapped in at once."""
-        from ecahd_core.cost import CollisionCost
         from ecahd_core.model_zoo import load_model
         from ecahd_core.navigation import SegmentRefiner
         from ecahd_core.planner import HierarchicalPlanner
@@ -455,7 +457,7 @@ class LocalRefiner(Node):
         p = self.params
         ckpt = (load_model("dd", grid, path=p.dd_model or None, footprint=self.footprint)
                 if p.dd_enabled else None)
-        cost = CollisionCost.build(grid, self.footprint)
+        cost = collision_cost(p, grid, self.footprint)
         # only the local stage (local_cost, refine, polish) is used: no SD model here
         planner = HierarchicalPlanner(
             None, ckpt, costmap=cost.costmap, footprint_points=cost.footprint_points,

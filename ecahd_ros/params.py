@@ -142,6 +142,11 @@ SHARED = {spec.name: spec for spec in [
     ParamSpec("clearance_margin", 0.02, "[m] the exact checker judges local plans and "
                                         "waypoints with the footprint grown by this (ours: "
                                         "room for the controller's tracking error)"),
+    ParamSpec("cost_margin", -1.0, "[m] J's cost map rises from 0 at this distance from an "
+                                   "obstacle to 1 on its edge (DD's trigger and guidance, "
+                                   "polishing, SD's collision-aware selection); -1 = by the "
+                                   "map: 0.5 on maps over 50 000 cells (a building's speckle "
+                                   "is then visible to J), else 0.1 (the paper's tables)"),
     ParamSpec("seed", 0, "seed of the sampler's torch.Generator (a seed reproduces the plans)"),
     ParamSpec("scan_offset_x", 0.0, "[m] x of the LiDAR on base_link (the base_link -> "
                                     "base_scan transform; sim_bridge and local_refiner agree)"),
@@ -155,6 +160,21 @@ SHARED = {spec.name: spec for spec in [
 def shared(*names: str) -> list[ParamSpec]:
     """The :data:`SHARED` specs of ``names``, in that order."""
     return [SHARED[name] for name in names]
+
+
+def require_cost_margin(params) -> None:
+    """``params.cost_margin`` must be > 0 m or -1 (by the map)."""
+    require(params.cost_margin > 0 or params.cost_margin == -1, "cost_margin",
+            params.cost_margin, "> 0 m, or -1 (by the map's size)")
+
+
+def collision_cost(params, grid, footprint):
+    """J of ``footprint`` on ``grid`` with the margin of ``params.cost_margin`` (-1: chosen by
+    the map, :meth:`~ecahd_core.cost.CostConfig.for_map`): a CollisionCost."""
+    from ecahd_core.cost import CollisionCost, CostConfig
+
+    margin = None if params.cost_margin < 0 else params.cost_margin
+    return CollisionCost.build(grid, footprint, CostConfig.for_map(grid, margin=margin))
 
 
 def make_robot(params, *, margin: float = 0.0):

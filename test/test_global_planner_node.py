@@ -222,7 +222,8 @@ def test_same_seed_reproduces_the_plan(rig):
 
 @pytest.mark.parametrize("name,value", [("horizon", 1), ("num_candidates", 0),
                                         ("selection", "random"), ("epsilon", -1.0),
-                                        ("warm_fraction", 1.5), ("replan_spacing", -2.0)])
+                                        ("warm_fraction", 1.5), ("replan_spacing", -2.0),
+                                        ("cost_margin", 0.0), ("cost_margin", -0.5)])
 def test_bad_parameters_are_named(name, value):
     values = {spec.name: spec.default for spec in PARAMETERS}  # the declared defaults
     values[name] = value
@@ -323,6 +324,32 @@ def test_replan_spacing_is_decided_by_the_map_and_the_model():
     for value, want in ((0.0, None), (2.5, 2.5)):
         values["replan_spacing"] = value
         assert GlobalPlannerParams(**values).runner_config(big, 6.5).replan_spacing == want
+
+
+def test_cost_margin_is_decided_by_the_map_unless_set():
+    """cost_margin -1: J's margin by the map (0.5 m on a building, 0.1 m on maze2d-large); a
+    value > 0 is used as given, by both nodes (the same shared parameter)."""
+    from ecahd_core.costmap import BUILDING_MARGIN, DEFAULT_MARGIN
+    from ecahd_core.footprint import make_footprint
+    from ecahd_core.maps import GridMap, builtin_map
+    from ecahd_ros.local_refiner import PARAMETERS as REFINER_PARAMETERS
+    from ecahd_ros.local_refiner import LocalRefinerParams
+    from ecahd_ros.params import collision_cost
+
+    building = GridMap(np.zeros((300, 300), dtype=np.int8), 0.03, (0.0, 0.0), name="b")
+    maze, fp = builtin_map("maze2d-large"), make_footprint("circle")
+    for specs, cls in ((PARAMETERS, GlobalPlannerParams),
+                       (REFINER_PARAMETERS, LocalRefinerParams)):
+        values = {spec.name: spec.default for spec in specs}
+        params = cls(**values)
+        assert params.cost_margin == -1
+        assert collision_cost(params, building, fp).config.margin == BUILDING_MARGIN
+        assert collision_cost(params, maze, fp).config.margin == DEFAULT_MARGIN
+        values["cost_margin"] = 0.25
+        assert collision_cost(cls(**values), building, fp).config.margin == 0.25
+        values["cost_margin"] = 0.0
+        with pytest.raises(EcahdError, match="cost_margin"):
+            cls(**values)
 
 
 def test_bad_method_is_named():
