@@ -352,9 +352,11 @@ class DenseConfig:
         c_th: DD runs when the straight local plan's collision cost exceeds this.
         enabled: run DD at all (False: follow the straight local plans, "w/o DD").
         guidance: guide DD by J (ECAHD) or not (HD without guidance).
-        guidance_weight: omega of Algorithm 2 line 5. The paper leaves it open; 0.03 in "x0"
-            space was the best of {0.01, 0.03, 0.1} and of "eps"-space omega 1 on 64 held-out
-            problems (docs/RESULTS.md, "Guidance strength").
+        guidance_weight: omega of Algorithm 2 line 5 at J's 0.1 m cost-map margin. The paper
+            leaves it open; 0.03 in "x0" space was the best of {0.01, 0.03, 0.1} and of
+            "eps"-space omega 1 on 64 held-out problems (docs/RESULTS.md, "Guidance
+            strength"). With a wider margin m (a building's 0.5 m) the HierarchicalPlanner
+            guides DD by omega x 0.1 m / m (:func:`guidance_weight_for`).
         num_steps: DDIM steps (None: the checkpoint's).
         eta: DDIM eta.
         retries: our safety rule, beyond the paper: when the refined segment's collision cost
@@ -481,6 +483,17 @@ MAX_EXTRA_ITERATIONS = 30
 
 
 
+def guidance_weight_for(omega: float, margin: float) -> float:
+    """DD's guidance weight on a cost map of ``margin`` [m]: ``omega`` (chosen at the 0.1 m
+    margin of the paper's tables) x DEFAULT_MARGIN / margin (ours). With a 0.5 m margin nearly
+    every DD segment in a building's aisle lies in J's cost zone, and omega 0.03 bent them:
+    plans 7-11% longer than unguided DD's on warehouse 2, none more collision-free; omega 0.006
+    (this rule) gave unguided DD's lengths, 2-5% over A* (docs/RESULTS.md, 2026-12-03)."""
+    from ecahd_core.costmap import DEFAULT_MARGIN
+
+    return float(omega) * DEFAULT_MARGIN / float(margin)
+
+
 class HierarchicalPlanner:
     """Algorithm 1 with Algorithm 2's DenseDiffusion, over a whole problem.
 
@@ -536,7 +549,9 @@ class HierarchicalPlanner:
         if self.dense.enabled:
             steps = self.dense.num_steps or sample_steps(dense_checkpoint)
             self.dd = DiffusionSampler.from_checkpoint(dense_checkpoint, device=device, config=SamplerConfig(
-                num_steps=steps, eta=self.dense.eta, guidance_weight=self.dense.guidance_weight,
+                num_steps=steps, eta=self.dense.eta,
+                guidance_weight=guidance_weight_for(self.dense.guidance_weight,
+                                                    self.cost_config.margin),
                 guide_last=self.dense.guide_last, max_guide_norm=self.dense.max_guide_norm,
                 guidance_space=self.dense.guidance_space))
 

@@ -343,3 +343,19 @@ def test_local_plans_have_the_points_the_dd_checkpoint_learnt(tmp_path):
     assert stages.plans.shape == (1, 7, 2) and bool(stages.dd_used[0])
     np.testing.assert_allclose(stages.plans[0, [0, -1]].numpy(), [[1.5, 1.5], [1.5, 3.5]],
                                atol=1e-5)
+
+
+def test_dd_guidance_weight_follows_the_cost_map_margin():
+    """omega is chosen at the 0.1 m margin; on a wider one (a building's 0.5 m) DD is guided by
+    omega x 0.1 / margin, so the paper's tables keep 0.03."""
+    from ecahd_core.planner import guidance_weight_for
+
+    fp = make_footprint("circle")
+    sd = SparseDiffusion(load_model("sd", GRID, footprint=fp), SparseConfig(num_candidates=4))
+    for margin, want in ((0.1, 0.03), (0.5, 0.006), (0.2, 0.015)):
+        cc = CostConfig(margin=margin)
+        hd = HierarchicalPlanner(sd, load_model("dd", GRID, footprint=fp),
+                                 costmap=cc.make_costmap(GRID), footprint_points=fp.points,
+                                 cost_config=cc, dense=DenseConfig())
+        assert hd.dd.config.guidance_weight == pytest.approx(want)
+        assert guidance_weight_for(0.03, margin) == pytest.approx(want)

@@ -179,7 +179,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
     from ecahd_core.navigation import replan_spacing_for
     from ecahd_core.placement import auto_reach, placer_for
     from ecahd_core.planner import (DenseConfig, FullDiffusion, HierarchicalPlanner, SparseConfig,
-                                    SparseDiffusion)
+                                    SparseDiffusion, guidance_weight_for)
     from ecahd_core.problems import make_problems
     from ecahd_core.safety import SafetyNet, SafetyNetConfig
 
@@ -308,6 +308,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                "sample_seed": settings.sample_seed, "candidates": settings.candidates,
                "selection": settings.selection,
                "guidance_weight": settings.guidance_weight, "c_th": settings.c_th,
+               "dd_guidance_weight": guidance_weight_for(settings.guidance_weight, margin),
                "guidance_space": settings.guidance_space, "margin": margin,
                "dd_retries": settings.dd_retries, "polish_steps": settings.polish_steps,
                "keep_better": settings.keep_better, "exact_rule": settings.exact_rule,
@@ -347,7 +348,10 @@ def format_markdown(r: PlanningBenchResult) -> str:
     lines = [f"Planning on {c['map']}: {c['problems']} held-out problems (seed {c['seed']}), "
              f"sampling seed {c['sample_seed']}, best of {c['candidates']} SD candidates "
              f"({c.get('selection', 'shortest_reaching')}), "
-             f"omega {c['guidance_weight']} ({c['guidance_space']} space), c_th {c['c_th']}, "
+             f"omega {c['guidance_weight']} ({c['guidance_space']} space"
+             + (f"; DD's x 0.1 m / margin = {c['dd_guidance_weight']:g}"
+                if c.get("dd_guidance_weight", c["guidance_weight"]) != c["guidance_weight"]
+                else "") + f"), c_th {c['c_th']}, "
              f"cost-map margin {c['margin']} m, DD retries {c['dd_retries']}, "
              f"polishing steps {c.get('polish_steps', 0)}, "
              f"keep the straight plan when DD is worse: {c.get('keep_better', False)}, "
