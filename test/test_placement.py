@@ -119,16 +119,17 @@ def test_best_judges_candidates_in_score_order_and_finds_the_argmin_over_free_on
 
 def test_a_wider_repair_reach_finds_a_door_away_from_the_leg():
     """A leg across a wall whose door is 2.7 m from where it crosses: leg repair within the
-    placement's 1 m reach cannot bend it through the door; with repair_reach 3 m it can."""
+    placement's 1 m reach cannot bend it through the door; within 3 m (the default) it can."""
     res = 0.05
     data = np.zeros((int(6 / res), int(10 / res)), dtype=np.int8)
     data[int(2.9 / res):int(3.1 / res), :] = 100  # a wall along y = 3 m
     data[int(2.9 / res):int(3.1 / res), int(7.2 / res):int(8.2 / res)] = 0  # a 1 m door
     grid, robot = GridMap(data, res, (0.0, 0.0), name="door"), make_footprint("circle")
     leg = np.array([[3.0, 1.0], [7.0, 5.0]])  # crosses the wall at x = 5 m
-    near, _ = WaypointPlacer(grid, robot, leg_rounds=3).repair(leg)
+    near, _ = WaypointPlacer(grid, robot, leg_rounds=3, repair_reach=1.0).repair(leg)
     assert not check_collision(near, robot, grid).collision_free
-    placer = WaypointPlacer(grid, robot, leg_rounds=3, repair_reach=3.0)
+    placer = WaypointPlacer(grid, robot, leg_rounds=3)
+    assert placer.repair_reach == 3.0
     far, added = placer.repair(leg)
     assert added >= 1 and check_collision(far, robot, grid).collision_free
     assert any(7.2 < x < 8.2 and 2.5 < y < 3.5 for x, y in far[1:-1])  # through the door
