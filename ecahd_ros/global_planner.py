@@ -122,6 +122,9 @@ PARAMETERS = [
                                    "<= 0.2): waypoints and the goal move at most 0.2 m"),
     ParamSpec("leg_repair", 3, "sd: rounds of leg repair while place_reach is on (> 0.2 m); "
                                "0 = off"),
+    ParamSpec("repair_reach", -1.0, "[m] sd: leg repair looks this far from a leg's middle for "
+                                    "its new waypoint (at most half the leg); -1 = the larger "
+                                    "of place_reach and 3.0"),
     ParamSpec("ddim_steps", 0, "DDIM steps of SD or FD; 0 = the checkpoint's"),
     ParamSpec("epsilon", 1.0, "[m] goal-reaching radius of the best-of-N rule"),
     ParamSpec("selection", "collision_aware", f"best-of-N rule: {list(SELECTION_RULES)} "
@@ -176,6 +179,7 @@ class GlobalPlannerParams:
     max_spacing: float
     place_reach: float
     leg_repair: int
+    repair_reach: float
     ddim_steps: int
     epsilon: float
     selection: str
@@ -205,6 +209,8 @@ class GlobalPlannerParams:
         require_non_negative(self, "ddim_steps", "footprint_padding", "seed", "replan_timeout",
                              "obstacle_memory", "clearance_margin", "max_spacing", "leg_repair")
         require_cost_margin(self)
+        require(self.repair_reach > 0 or self.repair_reach == -1, "repair_reach",
+                self.repair_reach, "> 0 m, or -1 (the larger of place_reach and 3.0)")
         require(self.place_reach >= 0 or self.place_reach == -1, "place_reach",
                 self.place_reach, ">= 0 m, or -1 (by the map's size)")
         require(self.replan_spacing >= 0 or self.replan_spacing == -1, "replan_spacing",
@@ -486,7 +492,8 @@ class GlobalPlanner(Node):
             on = reach > SNAP_DISTANCE  # off: the 0.2 m snap, no waypoint added
             self._placer_cache = (key, WaypointPlacer(
                 grid, self.judged, reach=reach if on else SNAP_DISTANCE,
-                leg_rounds=p.leg_repair if on else 0))
+                leg_rounds=p.leg_repair if on else 0,
+                repair_reach=p.repair_reach if p.repair_reach > 0 else None))
         return self._placer_cache[1]
 
     def _fused_cost(self):

@@ -223,7 +223,8 @@ def test_same_seed_reproduces_the_plan(rig):
 @pytest.mark.parametrize("name,value", [("horizon", 1), ("num_candidates", 0),
                                         ("selection", "random"), ("epsilon", -1.0),
                                         ("warm_fraction", 1.5), ("replan_spacing", -2.0),
-                                        ("cost_margin", 0.0), ("cost_margin", -0.5)])
+                                        ("cost_margin", 0.0), ("cost_margin", -0.5),
+                                        ("repair_reach", 0.0)])
 def test_bad_parameters_are_named(name, value):
     values = {spec.name: spec.default for spec in PARAMETERS}  # the declared defaults
     values[name] = value
