@@ -39,6 +39,7 @@ from ecahd_core.errors import MapError, TrajectoryError
 from ecahd_core.maps import FREE, OCCUPIED, GridMap, signed_distance
 
 DEFAULT_MARGIN = 0.1  # [m] distance from an obstacle at which the cost reaches 0
+DEFAULT_DILATION = 0.0  # [m] obstacle inflation (Table II "dilation"); 0 = the paper's Surface
 # [m] the margin on a building's map (auto_margin): J reads the cost map at sample points
 # (footprint points 0.15 m apart, N_interp per segment along the sweep), so with 0.1 m a single
 # occupied cell (SLAM speckle, a shelf corner) between samples is invisible to J, DD and
@@ -53,7 +54,6 @@ def auto_margin(grid) -> float:
     from ecahd_core.astar import COARSE_ABOVE_CELLS
 
     return BUILDING_MARGIN if grid.width * grid.height > COARSE_ABOVE_CELLS else DEFAULT_MARGIN
-DEFAULT_DILATION = 0.0  # [m] obstacle inflation (Table II "dilation"); 0 = the paper's Surface
 
 
 class CostMap:

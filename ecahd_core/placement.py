@@ -64,10 +64,11 @@ class WaypointPlacer:
         if not (math.isfinite(self.repair_reach) and self.repair_reach > 0):
             raise EcahdError(f"leg repair's reach must be a finite number > 0 m, "
                              f"got {repair_reach}")
-        self._repair_step = max(self.step, self.repair_reach / REPAIR_CANDIDATES)
         self.clearance = StaticClearance(grid)
-        self._offsets = self.lattice(self.reach)
-        self._offset_norms = np.linalg.norm(self._offsets, axis=1)
+        self._offsets = self.lattice(self.reach)  # (K, 2), nearest first
+        repair_step = max(self.step, self.repair_reach / REPAIR_CANDIDATES)
+        self._repair_offsets = (self._offsets if repair_step <= self.step
+                                else self.lattice(self.repair_reach, step=repair_step))
         # a circle of the inscribed radius centred on a cell centre this near an occupied cell
         # centre may overlap that cell (whose corner lies half a cell diagonal nearer)
         self._near = footprint.inscribed_radius + math.sqrt(0.5) * grid.resolution
@@ -92,20 +93,13 @@ class WaypointPlacer:
 
     def _repair_lattice(self, reach: float) -> np.ndarray:
         """The lattice leg repair searches within ``reach`` [m] (<= ``repair_reach``):
-        placement's own within ``reach``, or a coarser one for a wider repair reach."""
-        if self._repair_step <= self.step:
-            return self._within(reach)
-        if "_repair_offsets" not in self.__dict__:
-            off = self.lattice(self.repair_reach, step=self._repair_step)
-            self._repair_offsets, self._repair_norms = off, np.linalg.norm(off, axis=1)
-        return self._repair_offsets[:np.searchsorted(self._repair_norms, reach + 1e-9, "right")]
+        placement's own, or a coarser one for a repair reach wider than REPAIR_CANDIDATES
+        steps."""
+        return _nearest_within(self._repair_offsets, reach)
 
     def _within(self, reach: float) -> np.ndarray:
-        """:meth:`lattice` of ``reach`` (a prefix of the one built for ``self.reach``: both are
-        ordered nearest first)."""
-        if reach >= self.reach:
-            return self._offsets
-        return self._offsets[:np.searchsorted(self._offset_norms, reach + 1e-9, "right")]
+        """:meth:`lattice` of ``reach`` (a prefix of the one built for ``self.reach``)."""
+        return _nearest_within(self._offsets, reach)
 
     def blocked(self, waypoints) -> np.ndarray:
         """(P, 2) [m] -> (P,) bool: the footprint placed at each waypoint, facing along its
@@ -235,6 +229,13 @@ class WaypointPlacer:
         pts = a + t[:, :, None] * (b - a)[:, None, :]  # (K, n, 2)
         near = self.clearance.wall_distance(pts.reshape(-1, 2)).reshape(len(b), n) < self._near
         return (near & valid).sum(axis=1) / counts * length
+
+
+def _nearest_within(offsets: np.ndarray, reach: float) -> np.ndarray:
+    """The offsets (K, 2) [m] of a lattice ordered nearest first that lie within ``reach`` [m]:
+    a prefix, the same as the lattice built for ``reach`` itself."""
+    norms = np.linalg.norm(offsets, axis=1)
+    return offsets[:np.searchsorted(norms, reach + 1e-9, "right")]
 
 
 def headings(xy: np.ndarray) -> np.ndarray:
