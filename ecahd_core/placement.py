@@ -168,8 +168,8 @@ class WaypointPlacer:
 
     def leg_walls(self, xy: np.ndarray) -> np.ndarray:
         """(P, 2) [m] -> (P - 1,) :meth:`wall_length` of each straight leg."""
-        return np.array([float(self.wall_length(xy[k], xy[k + 1][None])[0])
-                         for k in range(len(xy) - 1)])
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        return self.wall_length(xy[:-1], xy[1:])
 
     def _best(self, at: np.ndarray, off: np.ndarray, prev: np.ndarray, nxt: np.ndarray | None,
               *, need: float | None = None) -> np.ndarray | None:
@@ -214,11 +214,13 @@ class WaypointPlacer:
         return None
 
     def wall_length(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """Length [m] of each straight leg from ``a`` (2,) to ``b`` (K, 2) where a circle of the
-        footprint's inscribed radius may touch an occupied cell (the distance transform of cell
-        centres, less half a cell diagonal; each leg sampled at ceil(length / resolution) + 1
-        evenly spaced points, so a leg's value does not depend on the others) -> (K,)."""
+        """Length [m] of each straight leg from ``a`` (2,) or (K, 2) to ``b`` (K, 2) where a
+        circle of the footprint's inscribed radius may touch an occupied cell (the distance
+        transform of cell centres, less half a cell diagonal; each leg sampled at
+        ceil(length / resolution) + 1 evenly spaced points, so a leg's value does not depend on
+        the others) -> (K,)."""
         b = np.asarray(b, dtype=np.float64).reshape(-1, 2)
+        a = np.broadcast_to(np.asarray(a, dtype=np.float64), b.shape)
         length = np.linalg.norm(b - a, axis=1)  # (K,)
         counts = np.ceil(length / self.grid.resolution).astype(np.int64) + 1  # (K,) >= 1
         counts = np.maximum(counts, 2)
@@ -226,7 +228,7 @@ class WaypointPlacer:
         j = np.arange(n)[None, :]  # (1, n)
         valid = j < counts[:, None]  # (K, n)
         t = np.minimum(j / (counts[:, None] - 1), 1.0)  # (K, n)
-        pts = a + t[:, :, None] * (b - a)[:, None, :]  # (K, n, 2)
+        pts = a[:, None, :] + t[:, :, None] * (b - a)[:, None, :]  # (K, n, 2)
         near = self.clearance.wall_distance(pts.reshape(-1, 2)).reshape(len(b), n) < self._near
         return (near & valid).sum(axis=1) / counts * length
 

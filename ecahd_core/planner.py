@@ -186,8 +186,10 @@ class SparseDiffusion:
              generator: torch.Generator | None = None, warm_start=None,
              warm_fraction: float | None = None, densify: bool = True) -> SparsePlan:
         """start, goal: (2,) [m] -> SparsePlan with waypoints (horizon, 2) from start to goal
-        (more than ``horizon`` when ``config.max_spacing`` is set and ``densify``; see
-        :meth:`densify`).
+        (more than ``horizon`` when the ``placer``'s leg repair bends a leg, also a
+        horizon-2 plan's one leg, or when ``config.max_spacing`` is set; see :meth:`densify`).
+        ``densify`` False: no densify, and a horizon-2 plan stays the straight (start, goal)
+        (HierarchicalPlanner's forced last plan).
 
         ``warm_start`` (horizon, 2) [m]: start the N candidates from this trajectory (its ends are
         replaced by start and goal) noised to the last ``warm_fraction`` of the DDIM schedule
@@ -227,7 +229,10 @@ class SparseDiffusion:
         best = select_best(cands_np, np.asarray(goal, dtype=np.float64), epsilon=cfg.epsilon,
                            rule=cfg.selection, collision_costs=col,
                            collision_tolerance=cfg.collision_tolerance)
-        waypoints, placed = self._place(cands_np[best])
+        # a straight (start, goal) plan is one leg: leg repair may bend it, unless this is a
+        # forced last plan (``densify`` False), which must reach the goal as it is
+        waypoints, placed = (self._place(cands_np[best]) if densify or horizon > 2
+                             else (cands_np[best], 0))
         if densify and cfg.max_spacing is not None:
             waypoints, more = self._place(self.densify(waypoints, generator=generator))
             placed += more
@@ -245,9 +250,9 @@ class SparseDiffusion:
         return (time.perf_counter() - t0) * 1e3
 
     def _place(self, waypoints: np.ndarray) -> tuple[np.ndarray, int]:
-        """(P, 2) [m] -> (waypoints with those in a wall moved by ``placer``, how many moved);
-        unchanged without a placer."""
-        if self.placer is None or len(waypoints) <= 2:
+        """(P, 2) [m] -> (waypoints with those in a wall moved by ``placer`` and legs crossing a
+        wall bent, how many moved or added); unchanged without a placer."""
+        if self.placer is None or len(waypoints) < 2:
             return waypoints, 0
         return self.placer(waypoints)
 

@@ -3,6 +3,7 @@ import json
 
 import pytest
 
+from ecahd_core.errors import EcahdError
 from ecahd_ros.cli import main
 
 KEYS = {"method", "guidance", "robot", "success", "success_final", "collision_free",
@@ -87,6 +88,21 @@ def test_warm_fraction_reaches_hd_and_is_reported():
     assert r.context["warm_fraction"] == 0.3 and len(r.cells) == 2
     assert "warm-started at 0.3 of the schedule" in format_markdown(r)
     assert PlanningBenchSettings().warm_fraction == 0.0  # from noise unless asked
+
+
+@pytest.mark.parametrize("guidance, want", [("on", [True]), ("off", [False])])
+def test_guidance_on_or_off_runs_only_those_cells(guidance, want):
+    from ecahd_core.bench.planning import (PlanningBenchSettings, format_markdown,
+                                           run_planning_benchmark)
+
+    r = run_planning_benchmark(PlanningBenchSettings(
+        problems=1, robots=("circle",), methods=("hd", "astar"), ablation=False,
+        safety_net=False, replan="once", guidance=guidance), progress=False)
+    assert [c.guidance for c in r.cells if c.method == "hd"] == want
+    assert [c.method for c in r.cells].count("astar") == 1
+    assert ("HD ✓ (ECAHD)" in format_markdown(r)) == want[0]
+    with pytest.raises(EcahdError, match="guidance must be one of"):
+        run_planning_benchmark(PlanningBenchSettings(guidance="maybe"), progress=False)
 
 
 def test_replan_spacing_is_reported_per_robot_when_the_models_differ():

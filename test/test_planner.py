@@ -359,3 +359,21 @@ def test_dd_guidance_weight_follows_the_cost_map_margin():
                                  cost_config=cc, dense=DenseConfig())
         assert hd.dd.config.guidance_weight == pytest.approx(want)
         assert guidance_weight_for(0.03, margin) == pytest.approx(want)
+
+
+def test_a_straight_last_leg_through_a_wall_gets_leg_repair_unless_forced():
+    """A horizon-2 plan (start, goal) is one leg: the placer's leg repair bends it like any other
+    SD leg; HierarchicalPlanner's forced last plan (densify False) stays straight."""
+    from ecahd_core.placement import WaypointPlacer
+
+    fp = make_footprint("circle")
+    placer = WaypointPlacer(GRID, fp, reach=1.0)
+    sd = SparseDiffusion(load_model("sd", GRID, footprint=fp), SparseConfig(num_candidates=4),
+                         placer=placer)
+    start, goal = np.array([1.5, 1.5]), np.array([1.5, 3.5])  # a wall between, free round it
+    assert placer.leg_walls(np.stack([start, goal]))[0] > 0
+    bent = sd.plan(start, goal, horizon=2).waypoints
+    assert len(bent) > 2 and np.array_equal(bent[[0, -1]], np.stack([start, goal]))
+    assert placer.leg_walls(bent).sum() < placer.leg_walls(np.stack([start, goal]))[0]
+    forced = sd.plan(start, goal, horizon=2, densify=False).waypoints
+    assert np.array_equal(forced, np.stack([start, goal]))

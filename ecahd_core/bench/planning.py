@@ -35,6 +35,8 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from ecahd_core.errors import EcahdError
+
 log = logging.getLogger(__name__)
 
 METHODS = ("fd", "sd", "hd", "astar")
@@ -92,9 +94,13 @@ class PlanningBenchSettings:
     replan_spacing: float | None = None  # [m] HierarchicalPlanner's (None: by the map; 0: off)
     precision: str = "fp32"  # the SD Transformer's inference precision (SparseConfig.precision)
     ablation: bool = True
+    guidance: str = "both"  # diffusion methods with and without guidance, or "on" / "off" only
     safety_net: bool = True  # ours: judge HD / ECAHD with and without the net (ecahd_core.safety)
     net_retries: int = 2  # SafetyNetConfig's default
     net_resamples: int = 2  # SafetyNetConfig's default (0: the net skips its resample rule)
+
+
+GUIDANCE_RUNS = {"both": (False, True), "on": (True,), "off": (False,)}
 
 
 @dataclass
@@ -169,6 +175,10 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                            ) -> PlanningBenchResult:
     import torch
     from tqdm import tqdm
+
+    if settings.guidance not in GUIDANCE_RUNS:
+        raise EcahdError(f"guidance must be one of {list(GUIDANCE_RUNS)}, got "
+                         f"{settings.guidance!r}")
 
     from ecahd_core.astar import clearance_for_footprint, planner_for
     from ecahd_core.collision import exact_check_for
@@ -289,7 +299,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
 
     for robot in settings.robots:
         for method in settings.methods:
-            for guidance in ((False,) if method == "astar" else (False, True)):
+            for guidance in ((False,) if method == "astar" else GUIDANCE_RUNS[settings.guidance]):
                 cell, paths = run_cell(method, guidance, robot)
                 cells.append(cell)
                 examples[(method, guidance, robot)] = paths[:4]

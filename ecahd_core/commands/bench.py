@@ -221,6 +221,9 @@ def _add_planning_arguments(parser: argparse.ArgumentParser) -> None:
                         help="[m] SD's waypoints in a wall move into free space within R, legs "
                              "crossing a wall get a placed midpoint (ours; 0: off; default: "
                              "on at 1 m for maps over 50 000 cells, off on smaller ones)")
+    parser.add_argument("--guidance", choices=("both", "on", "off"), default=d.guidance,
+                        help="run the diffusion methods with and without J's guidance, or only "
+                             "one of the two (on: ECAHD's own setting)")
     parser.add_argument("--no-ablation", action="store_true", help="skip Table II")
     parser.add_argument("--json", metavar="FILE", help="one record per cell")
     parser.add_argument("--md", metavar="FILE", help="Table I / Table II as markdown")
@@ -241,7 +244,8 @@ def _run_planning(args: argparse.Namespace) -> int:
         keep_better=not args.no_keep_better, exact_rule=not args.no_exact_rule,
         replan=args.replan, warm_fraction=args.warm_fraction, max_spacing=args.max_spacing,
         place_reach=args.place_reach, ablation=not args.no_ablation, precision=args.precision,
-        net_resamples=args.net_resamples, replan_spacing=args.replan_spacing)
+        net_resamples=args.net_resamples, replan_spacing=args.replan_spacing,
+        guidance=args.guidance)
     result = run_planning_benchmark(settings, progress=not args.no_progress)
     md = format_markdown(result)
     print(md)
