@@ -30,6 +30,8 @@ LEG_ROUNDS = 3  # rounds of leg repair (a leg crossing a wall gets a placed midp
 # 89.1% to 94.8% of 192 held-out plans (docs/RESULTS.md, 2026-12-03 06:34)
 REPAIR_REACH = 3.0
 REPAIR_CANDIDATES = 30  # lattice steps across a repair reach at most (a coarser step beyond)
+# candidates per side the two-bend repair pairs up (TWO_BEND_SAMPLES^2 legs judged at most)
+TWO_BEND_SAMPLES = 48
 
 
 class WaypointPlacer:
@@ -44,11 +46,13 @@ class WaypointPlacer:
         repair_reach: [m] how far from a leg's middle :meth:`repair` looks for its new
             waypoint (at most half the leg; None: the larger of ``reach`` and REPAIR_REACH);
             its lattice step is at least repair_reach / REPAIR_CANDIDATES.
+        two_bends: where no single new waypoint makes a leg cross less wall, :meth:`repair`
+            tries two (:meth:`_two_bends`, on the same lattice).
     """
 
     def __init__(self, grid, footprint, *, reach: float = PLACE_REACH,
                  step: float | None = None, leg_rounds: int = LEG_ROUNDS,
-                 repair_reach: float | None = None) -> None:
+                 repair_reach: float | None = None, two_bends: bool = True) -> None:
         from ecahd_core.sensing import StaticClearance
 
         if not (math.isfinite(reach) and reach > 0):
@@ -59,6 +63,7 @@ class WaypointPlacer:
         if leg_rounds < 0:
             raise EcahdError(f"leg_rounds must be >= 0, got {leg_rounds}")
         self.leg_rounds = int(leg_rounds)
+        self.two_bends = bool(two_bends)
         self.repair_reach = (max(self.reach, REPAIR_REACH) if repair_reach is None
                              else float(repair_reach))
         if not (math.isfinite(self.repair_reach) and self.repair_reach > 0):
@@ -142,7 +147,8 @@ class WaypointPlacer:
         """Leg repair (ours): every straight leg that passes nearer a wall than the footprint
         fits (:meth:`wall_length` > 0) gets a new waypoint, its midpoint placed (within half the
         leg's length, at most ``reach``) where the two new legs cross the least wall; kept only
-        if that is less than the old leg's. ``rounds`` (default ``leg_rounds``) times.
+        if that is less than the old leg's; where no single waypoint does, two
+        (:meth:`_two_bends`, when ``two_bends``). ``rounds`` (default ``leg_rounds``) times.
         waypoints: (P, 2) [m] -> ((P', 2) [m], P' - P waypoints added); the ends stay."""
         xy = np.asarray(waypoints, dtype=np.float64).reshape(-1, 2)
         added = 0
@@ -159,12 +165,56 @@ class WaypointPlacer:
                     reach = min(self.repair_reach, 0.5 * float(np.linalg.norm(b - a)))
                     mid = self._best(0.5 * (a + b), self._repair_lattice(reach), a, b,
                                      need=walls[k])
+                    if mid is None and self.two_bends:
+                        mid = self._two_bends(a, b, need=walls[k])
                     if mid is not None:
-                        pieces.append(mid[None])
-                        added += 1
+                        mid = mid.reshape(-1, 2)
+                        pieces.append(mid)
+                        added += len(mid)
                 pieces.append(b[None])
             xy = np.concatenate(pieces)
         return xy, added
+
+    def _two_bends(self, a: np.ndarray, b: np.ndarray, *, need: float) -> np.ndarray | None:
+        """Two new waypoints (2, 2) [m] for the leg a -> b, m1 seen from ``a`` and m2 seen from
+        ``b`` (their legs cross no more wall than the least of any candidate's) with m1 -> m2
+        crossing none: the way round an obstacle that no single bend finds. Candidates: the
+        repair lattice round the leg's middle, at most TWO_BEND_SAMPLES per side (the best by
+        the detour's length, then evenly over the rest); the shortest pair whose three legs
+        cross less wall than ``need`` [m] and whose two poses the exact checker finds free.
+        None if there is none."""
+        from ecahd_core.collision import DEFAULT_TOLERANCE
+
+        cand = 0.5 * (a + b) + self._repair_offsets
+        cand = cand[self.grid.in_bounds(cand)]
+        if len(cand) == 0:
+            return None
+        cand = cand[self.clearance.wall_distance(cand) >= self._near]
+        if len(cand) == 0:
+            return None
+        tol = self.grid.resolution
+        sides = []
+        for end in (a, b):
+            walls = self.wall_length(end, cand)
+            seen = cand[walls <= walls.min() + tol]
+            detour = np.linalg.norm(seen - a, axis=1) + np.linalg.norm(seen - b, axis=1)
+            sides.append(_spread(seen[np.argsort(detour, kind="stable")], TWO_BEND_SAMPLES))
+        m1 = np.repeat(sides[0], len(sides[1]), axis=0)  # (K1 K2, 2)
+        m2 = np.tile(sides[1], (len(sides[0]), 1))
+        free = self.wall_length(m1, m2) == 0
+        m1, m2 = m1[free], m2[free]
+        if len(m1) == 0:
+            return None
+        length = (np.linalg.norm(m1 - a, axis=1) + np.linalg.norm(m2 - m1, axis=1)
+                  + np.linalg.norm(b - m2, axis=1))
+        for i in np.argsort(length, kind="stable")[:TWO_BEND_SAMPLES].tolist():
+            path = np.stack([a, m1[i], m2[i], b])
+            if not float(self.leg_walls(path).sum()) < need:
+                continue
+            pose = np.column_stack([path[1:3], headings(path)[1:3]])
+            if (self.clearance.depths(pose, self.footprint) <= DEFAULT_TOLERANCE).all():
+                return path[1:3]
+        return None
 
     def leg_walls(self, xy: np.ndarray) -> np.ndarray:
         """(P, 2) [m] -> (P - 1,) :meth:`wall_length` of each straight leg."""
@@ -231,6 +281,16 @@ class WaypointPlacer:
         pts = a[:, None, :] + t[:, :, None] * (b - a)[:, None, :]  # (K, n, 2)
         near = self.clearance.wall_distance(pts.reshape(-1, 2)).reshape(len(b), n) < self._near
         return (near & valid).sum(axis=1) / counts * length
+
+
+def _spread(points: np.ndarray, n: int) -> np.ndarray:
+    """At most ``n`` of ``points`` (K, 2) in their order: the first n / 2, then evenly spaced
+    over the rest."""
+    if len(points) <= n:
+        return points
+    head = n // 2
+    rest = np.linspace(head, len(points) - 1, n - head).round().astype(np.int64)
+    return np.concatenate([points[:head], points[rest]])
 
 
 def _nearest_within(offsets: np.ndarray, reach: float) -> np.ndarray:

@@ -135,3 +135,22 @@ def test_a_wider_repair_reach_finds_a_door_away_from_the_leg():
     assert any(7.2 < x < 8.2 and 2.5 < y < 3.5 for x, y in far[1:-1])  # through the door
     with pytest.raises(EcahdError, match="leg repair's reach"):
         WaypointPlacer(grid, robot, repair_reach=0.0)
+
+
+def test_two_bends_take_a_leg_round_the_end_of_a_wall_that_no_single_bend_clears():
+    """a and b 0.6 m either side of a wall that ends 1 m above the map's edge: every single new
+    waypoint leaves a leg clipping the wall's end; two (one below each side) clear it."""
+    res = 0.05
+    data = np.zeros((int(6 / res), int(6 / res)), dtype=np.int8)
+    data[int(1.0 / res):, int(2.9 / res):int(3.1 / res)] = 100  # a wall x = 3 m, from y = 1 m up
+    grid, robot = GridMap(data, res, (0.0, 0.0), name="wall_end"), make_footprint("circle")
+    leg = np.array([[2.3, 3.0], [3.7, 3.0]])
+    one, _ = WaypointPlacer(grid, robot, leg_rounds=3, two_bends=False).repair(leg)
+    assert not check_collision(one, robot, grid).collision_free
+    placer = WaypointPlacer(grid, robot, leg_rounds=3)
+    two, added = placer.repair(leg)
+    assert added >= 2 and check_collision(two, robot, grid).collision_free
+    np.testing.assert_array_equal(two[[0, -1]], leg)
+    assert placer.leg_walls(two).max() == 0
+    # round the wall's end: a waypoint below it on each side
+    assert any(x < 2.9 and y < 1.0 for x, y in two) and any(x > 3.1 and y < 1.0 for x, y in two)
