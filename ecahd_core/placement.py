@@ -78,11 +78,12 @@ class WaypointPlacer:
         # centre may overlap that cell (whose corner lies half a cell diagonal nearer)
         self._near = footprint.inscribed_radius + math.sqrt(0.5) * grid.resolution
 
-    def __call__(self, waypoints, *, last_reach: float | None = 0.0) -> tuple[np.ndarray, int]:
-        """:meth:`place`, then :meth:`repair` (``leg_rounds``): (P, 2) [m] -> ((P', 2) [m],
-        waypoints moved or added)."""
+    def __call__(self, waypoints, *, last_reach: float | None = 0.0,
+                 legs: int | None = None) -> tuple[np.ndarray, int]:
+        """:meth:`place`, then :meth:`repair` (``leg_rounds``, the first ``legs`` legs; None:
+        all): (P, 2) [m] -> ((P', 2) [m], waypoints moved or added)."""
         xy, moved = self.place(waypoints, last_reach=last_reach)
-        xy, added = self.repair(xy)
+        xy, added = self.repair(xy, legs=legs)
         return xy, moved + added
 
     def lattice(self, reach: float, *, step: float | None = None) -> np.ndarray:
@@ -143,25 +144,29 @@ class WaypointPlacer:
                 moved += 1
         return xy, moved
 
-    def repair(self, waypoints, *, rounds: int | None = None) -> tuple[np.ndarray, int]:
+    def repair(self, waypoints, *, rounds: int | None = None,
+               legs: int | None = None) -> tuple[np.ndarray, int]:
         """Leg repair (ours): every straight leg that passes nearer a wall than the footprint
         fits (:meth:`wall_length` > 0) gets a new waypoint, its midpoint placed (within half the
         leg's length, at most ``reach``) where the two new legs cross the least wall; kept only
         if that is less than the old leg's; where no single waypoint does, two
         (:meth:`_two_bends`, when ``two_bends``). ``rounds`` (default ``leg_rounds``) times.
+        ``legs``: only the first ``legs`` legs, and what they become (None: every leg; a
+        re-plan that follows only its first leg needs no more, and gets the same first leg).
         waypoints: (P, 2) [m] -> ((P', 2) [m], P' - P waypoints added); the ends stay."""
         xy = np.asarray(waypoints, dtype=np.float64).reshape(-1, 2)
         added = 0
+        span = len(xy) - 1 if legs is None else min(int(legs), len(xy) - 1)  # legs to repair
         for _ in range(self.leg_rounds if rounds is None else rounds):
             if len(xy) < 2:
                 break
-            walls = self.leg_walls(xy)  # (P - 1,)
+            walls = self.leg_walls(xy[:span + 1])  # (span,)
             if not (walls > 0).any():
                 break
-            pieces = [xy[:1]]
+            pieces, grown = [xy[:1]], 0
             for k in range(len(xy) - 1):
                 a, b = xy[k], xy[k + 1]
-                if walls[k] > 0:
+                if k < span and walls[k] > 0:
                     reach = min(self.repair_reach, 0.5 * float(np.linalg.norm(b - a)))
                     mid = self._best(0.5 * (a + b), self._repair_lattice(reach), a, b,
                                      need=walls[k])
@@ -170,9 +175,10 @@ class WaypointPlacer:
                     if mid is not None:
                         mid = mid.reshape(-1, 2)
                         pieces.append(mid)
-                        added += len(mid)
+                        grown += len(mid)
                 pieces.append(b[None])
             xy = np.concatenate(pieces)
+            span, added = span + grown, added + grown
         return xy, added
 
     def _two_bends(self, a: np.ndarray, b: np.ndarray, *, need: float) -> np.ndarray | None:

@@ -184,12 +184,15 @@ class SparseDiffusion:
 
     def plan(self, start, goal, *, horizon: int | None = None,
              generator: torch.Generator | None = None, warm_start=None,
-             warm_fraction: float | None = None, densify: bool = True) -> SparsePlan:
+             warm_fraction: float | None = None, densify: bool = True,
+             repair_legs: int | None = None) -> SparsePlan:
         """start, goal: (2,) [m] -> SparsePlan with waypoints (horizon, 2) from start to goal
         (more than ``horizon`` when the ``placer``'s leg repair bends a leg, also a
         horizon-2 plan's one leg, or when ``config.max_spacing`` is set; see :meth:`densify`).
         ``densify`` False: no densify, and a horizon-2 plan stays the straight (start, goal)
-        (HierarchicalPlanner's forced last plan).
+        (HierarchicalPlanner's forced last plan). ``repair_legs``: leg repair on the first
+        this many legs only (None: all; ignored with ``config.max_spacing``): a re-plan whose
+        caller follows only its first leg gets that leg as it would with all repaired.
 
         ``warm_start`` (horizon, 2) [m]: start the N candidates from this trajectory (its ends are
         replaced by start and goal) noised to the last ``warm_fraction`` of the DDIM schedule
@@ -231,7 +234,8 @@ class SparseDiffusion:
                            collision_tolerance=cfg.collision_tolerance)
         # a straight (start, goal) plan is one leg: leg repair may bend it, unless this is a
         # forced last plan (``densify`` False), which must reach the goal as it is
-        waypoints, placed = (self._place(cands_np[best]) if densify or horizon > 2
+        legs = repair_legs if cfg.max_spacing is None else None
+        waypoints, placed = (self._place(cands_np[best], legs=legs) if densify or horizon > 2
                              else (cands_np[best], 0))
         if densify and cfg.max_spacing is not None:
             waypoints, more = self._place(self.densify(waypoints, generator=generator))
@@ -249,12 +253,14 @@ class SparseDiffusion:
                   densify=False)
         return (time.perf_counter() - t0) * 1e3
 
-    def _place(self, waypoints: np.ndarray) -> tuple[np.ndarray, int]:
+    def _place(self, waypoints: np.ndarray, *, legs: int | None = None
+               ) -> tuple[np.ndarray, int]:
         """(P, 2) [m] -> (waypoints with those in a wall moved by ``placer`` and legs crossing a
-        wall bent, how many moved or added); unchanged without a placer."""
+        wall bent (the first ``legs`` legs; None: all), how many moved or added); unchanged
+        without a placer."""
         if self.placer is None or len(waypoints) < 2:
             return waypoints, 0
-        return self.placer(waypoints)
+        return self.placer(waypoints, legs=legs)
 
     def _collision_costs(self, cands: torch.Tensor, goals: torch.Tensor) -> np.ndarray | None:
         """J's collision cost of candidates (B, P, 2) [m] towards goals (2,) or (B, 2) -> (B,),
@@ -324,7 +330,8 @@ class SparseDiffusion:
         return wp
 
     def replan(self, start, goal, previous=None, *, horizon: int | None = None,
-               generator: torch.Generator | None = None, densify: bool = True) -> SparsePlan:
+               generator: torch.Generator | None = None, densify: bool = True,
+               repair_legs: int | None = None) -> SparsePlan:
         """Re-plan from ``start`` (2,) [m] to ``goal`` (2,) [m] while following ``previous``
         (P, 2) [m], the current plan (None: no plan yet).
 
@@ -341,7 +348,7 @@ class SparseDiffusion:
                 warm = previous[len(previous) - horizon:].copy()
                 warm[0] = np.asarray(start, dtype=np.float64).reshape(2)
         return self.plan(start, goal, horizon=horizon, generator=generator, warm_start=warm,
-                         densify=densify)
+                         densify=densify, repair_legs=repair_legs)
 
 
 # ----------------------------------------------------------------------- Algorithms 1 and 2
@@ -802,7 +809,9 @@ class HierarchicalPlanner:
             sparse = self.sparse.replan(S.numpy(), G.numpy(),
                                         global_plans[-1] if global_plans else None,
                                         horizon=horizon, generator=generator,
-                                        densify=not forced)  # lines 2-12
+                                        densify=not forced,
+                                        repair_legs=None if self.sparse.config.warm_fraction
+                                        else 1)  # lines 2-12; only t^g_p[0:2] is followed
             waypoints, placed = sparse.waypoints, placed + sparse.placed
             times["sd"] += (time.perf_counter() - t0) * 1e3
             global_plans.append(waypoints)

@@ -154,3 +154,19 @@ def test_two_bends_take_a_leg_round_the_end_of_a_wall_that_no_single_bend_clears
     assert placer.leg_walls(two).max() == 0
     # round the wall's end: a waypoint below it on each side
     assert any(x < 2.9 and y < 1.0 for x, y in two) and any(x > 3.1 and y < 1.0 for x, y in two)
+
+
+def test_repairing_only_the_first_legs_gives_those_legs_as_a_full_repair_does():
+    """``legs=1``: the first leg is bent exactly as when every leg is repaired; the others stay."""
+    grid, robot = block_map(0.05), make_footprint("circle")
+    # both legs cross the block: bottom corridor -> top corridor -> bottom corridor
+    plan = np.array([[0.5, 0.75], [3.0, 3.25], [5.5, 0.75]])
+    placer = WaypointPlacer(grid, robot, reach=1.5, leg_rounds=4)
+    full, n_full = placer.repair(plan)
+    first, n_first = placer.repair(plan, legs=1)
+    assert 0 < n_first < n_full
+    k = int(np.flatnonzero((first == plan[1]).all(axis=1))[0])  # where the first leg ends
+    np.testing.assert_array_equal(first[:k + 1], full[:k + 1])
+    np.testing.assert_array_equal(first[k:], plan[1:])  # the second leg as it was
+    none, n_none = placer.repair(plan, legs=0)
+    assert n_none == 0 and np.array_equal(none, plan)

@@ -377,3 +377,31 @@ def test_a_straight_last_leg_through_a_wall_gets_leg_repair_unless_forced():
     assert placer.leg_walls(bent).sum() < placer.leg_walls(np.stack([start, goal]))[0]
     forced = sd.plan(start, goal, horizon=2, densify=False).waypoints
     assert np.array_equal(forced, np.stack([start, goal]))
+
+
+def test_every_waypoint_repairs_only_the_followed_leg_and_plans_the_same():
+    """HierarchicalPlanner's every_waypoint loop follows only each re-plan's first leg, so leg
+    repair on that leg alone (``repair_legs=1``) gives the very same trajectory as on all."""
+    from ecahd_core.placement import WaypointPlacer
+
+    fp = make_footprint("circle")
+    cc = CostConfig()
+    sd = SparseDiffusion(load_model("sd", GRID, footprint=fp), SparseConfig(num_candidates=4),
+                         placer=WaypointPlacer(GRID, fp, reach=1.0))
+    hd = HierarchicalPlanner(sd, load_model("dd", GRID, footprint=fp),
+                             costmap=cc.make_costmap(GRID), footprint_points=fp.points,
+                             cost_config=cc)
+    start, goal = np.array([1.5, 1.5]), np.array([10.5, 7.5])
+    asked = []
+    plain = sd.plan
+
+    def spy(*args, repair_legs=None, **kwargs):
+        asked.append(repair_legs)
+        return plain(*args, repair_legs=repair_legs, **kwargs)
+
+    sd.plan = spy
+    one = hd.plan(start, goal, generator=torch.Generator().manual_seed(0))
+    assert set(asked) == {1}
+    sd.plan = lambda *args, repair_legs=None, **kwargs: plain(*args, **kwargs)
+    every = hd.plan(start, goal, generator=torch.Generator().manual_seed(0))
+    np.testing.assert_array_equal(one.trajectory, every.trajectory)
