@@ -193,8 +193,6 @@ class WaypointPlacer:
 
         cand = 0.5 * (a + b) + self._repair_offsets
         cand = cand[self.grid.in_bounds(cand)]
-        if len(cand) == 0:
-            return None
         cand = cand[self.clearance.wall_distance(cand) >= self._near]
         if len(cand) == 0:
             return None

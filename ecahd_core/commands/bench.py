@@ -172,7 +172,7 @@ def _run_sd_quality(args: argparse.Namespace) -> int:
 
 # -------------------------------------------------------------------------------- planning
 def _add_planning_arguments(parser: argparse.ArgumentParser) -> None:
-    from ecahd_core.bench.planning import METHODS, ROBOTS, PlanningBenchSettings
+    from ecahd_core.bench.planning import GUIDANCE_RUNS, METHODS, ROBOTS, PlanningBenchSettings
     from ecahd_core.planner import SELECTION_RULES
 
     d = PlanningBenchSettings()
@@ -221,7 +221,7 @@ def _add_planning_arguments(parser: argparse.ArgumentParser) -> None:
                         help="[m] SD's waypoints in a wall move into free space within R, legs "
                              "crossing a wall get a placed midpoint (ours; 0: off; default: "
                              "on at 1 m for maps over 50 000 cells, off on smaller ones)")
-    parser.add_argument("--guidance", choices=("both", "on", "off"), default=d.guidance,
+    parser.add_argument("--guidance", choices=tuple(GUIDANCE_RUNS), default=d.guidance,
                         help="run the diffusion methods with and without J's guidance, or only "
                              "one of the two (on: ECAHD's own setting)")
     parser.add_argument("--no-ablation", action="store_true", help="skip Table II")
