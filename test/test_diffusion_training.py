@@ -244,6 +244,27 @@ def test_resume_continues_exactly_from_the_saved_step(tmp_path):
               out_path=tmp_path / "x.pt", resume_from=light, **kw)
 
 
+def test_a_time_limit_stops_training_early_and_keeps_a_whole_checkpoint(tmp_path):
+    """time_limit_s stops the loop once that many seconds have passed: far short of ``steps``,
+    with the last (partial) loss window recorded and the checkpoint at the step reached; the
+    steps taken are those of the same run without a limit (the same losses)."""
+    arrays = toy_arrays(n=64)
+    model_cfg = tiny_config(d_model=16, n_layers=1)
+    common = dict(batch_size=16, lr=1e-3, warmup_steps=5, ema_decay=0.9, seed=3, log_every=50)
+    kw = dict(kind="sd", meta=META, progress=False)
+    limited = train(model_cfg, arrays, NORMALIZER,
+                    TrainConfig(steps=10 ** 7, time_limit_s=0.3, **common),
+                    out_path=tmp_path / "limited.pt", **kw)
+    assert 0 < limited.step < 10 ** 7
+    assert load_checkpoint(limited.path).step == limited.step
+    assert limited.loss_history[-1][0] == limited.step
+    full = train(model_cfg, arrays, NORMALIZER, TrainConfig(steps=limited.step, **common),
+                 out_path=tmp_path / "full.pt", **kw)
+    assert full.loss_history == limited.loss_history
+    with pytest.raises(ValueError, match="time_limit_s"):
+        TrainConfig(steps=1, time_limit_s=0)
+
+
 def test_bf16_training_runs_under_autocast_and_keeps_float32_weights(tmp_path):
     """precision="bf16": the forward pass runs in bfloat16 (so the weights differ from the
     float32 run's), the loss falls as in float32, and weights and EMA stay float32."""

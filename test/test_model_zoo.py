@@ -146,25 +146,36 @@ def test_train_all_fits_its_steps_to_a_time_budget(tmp_path, capsys, monkeypatch
     import re
 
     from ecahd_core.commands import train
-    from ecahd_core.commands.train import BUDGET_FILL, budget_scale
+    from ecahd_core.commands.train import BUDGET_FILL, STEP_CAP, budget_scale
 
     assert budget_scale(100.0, {"sd": 30.0, "dd": 20.0}) == pytest.approx(2 * BUDGET_FILL)
     with pytest.raises(EcahdError, match="budget is spent"):
         budget_scale(-5.0, {"sd": 30.0})
     args = ["train-all", "--map", "maze2d-umaze", "--pairs", "6", "--work-dir",
             str(tmp_path / "work"), "--out-dir", str(tmp_path / "models"), "--no-progress"]
-    # a slow machine (0.1 s a step): 3 s leave a few steps of every recipe
+
+    def steps_of(out):
+        found = re.search(r"budget: recipes' steps x ([0-9.e+-]+) \(SD (\d+), DD (\d+)", out)
+        assert found, out
+        taken = {k: int(re.search(rf"^{k}: (\d+) steps", out, re.M)[1]) for k in ("sd", "dd")}
+        return float(found[1]), {"sd": int(found[2]), "dd": int(found[3])}, taken
+
+    # the step-time probe reads a slow machine (0.1 s a step): 3 s leave a few steps of every
+    # recipe by the estimate, one factor on every recipe; the machine is in fact faster, so
+    # each model trains on to the cap (STEP_CAP x its estimate), not past it
     monkeypatch.setattr(train, "seconds_per_step", lambda *a, **k: 0.1)
     assert main(args + ["--minutes", "0.05"]) == 0
-    out = capsys.readouterr().out
-    found = re.search(r"budget: recipes' steps x ([0-9.]+) \(SD (\d+), DD (\d+)\)", out)
-    assert found, out
-    scale, sd, dd = float(found[1]), int(found[2]), int(found[3])
-    assert 0 < scale < BUDGET_FILL * 3 / (0.1 * RECIPES["sd"].steps) 
-    # one factor on every recipe (the printed factor has 3 digits)
-    assert abs(sd - RECIPES["sd"].steps * scale) <= 1 + 0.01 * sd
-    assert abs(dd - RECIPES["dd"].steps * scale) <= 1 + 0.01 * dd
-    assert re.search(rf"^sd: {sd} steps", out, re.M) and re.search(rf"^dd: {dd} steps", out, re.M)
+    scale, estimated, taken = steps_of(capsys.readouterr().out)
+    assert 0 < scale < BUDGET_FILL * 3 / (0.1 * RECIPES["sd"].steps)
+    for k in ("sd", "dd"):
+        assert abs(estimated[k] - RECIPES[k].steps * scale) <= 1 + 0.01 * estimated[k]
+        assert estimated[k] <= taken[k] <= int(estimated[k] * STEP_CAP)
+    # the probe reads a far faster machine than this (1e-5 s a step): the time limit, not the
+    # estimate, stops each model, and train-all still ends within its budget
+    monkeypatch.setattr(train, "seconds_per_step", lambda *a, **k: 1e-5)
+    assert main(args + ["--minutes", "0.05"]) == 0
+    scale, estimated, taken = steps_of(capsys.readouterr().out)
+    assert all(0 < taken[k] < estimated[k] for k in ("sd", "dd")), (estimated, taken)
     assert main(args + ["--minutes", "1", "--steps-scale", "2"]) == 2  # one or the other
 
 

@@ -67,19 +67,23 @@ def add_all_arguments(p: argparse.ArgumentParser) -> None:
                    help="inference-only models go here (default: the package's models folder; "
                         "another folder is found through $ECAHD_MODELS)")
     p.add_argument("--minutes", type=float, default=None, metavar="M",
-                   help="a time budget: once the dataset is made, every recipe's step count is "
-                        "scaled by one factor so that training ends about M minutes after the "
-                        "start, by step times measured on this machine (more steps on a fast "
-                        "machine, fewer on a slow one; replaces --steps-scale). Default: the "
-                        "recipes' steps")
+                   help="a time budget: once the dataset is made, each model trains until its "
+                        "share of the time left is spent (shares by step times measured at the "
+                        "start), so that train-all ends about M minutes after the start: more "
+                        "steps on a fast machine, fewer on a slow or busy one (replaces "
+                        "--steps-scale; the warm-up is the recipes' scaled by the expected "
+                        "steps). Default: the recipes' steps")
     _add_common(p)
 
 
 def train_one(kind: str, dataset, *, out: Path, seed: int, device: str, steps: int | None = None,
               batch_size: int | None = None, warmup: int | None = None,
               steps_scale: float = 1.0, resume: str | None = None, ship: Path | None = None,
-              progress: bool = True, precision: str = "fp32"):
-    """Train one model kind on an ExpertDataset; returns the TrainResult."""
+              progress: bool = True, precision: str = "fp32",
+              time_limit_s: float | None = None):
+    """Train one model kind on an ExpertDataset; returns the TrainResult. With
+    ``time_limit_s`` [s] training stops then, or at ``STEP_CAP`` x the scaled steps (the warm-up
+    stays the scaled run's)."""
     from ecahd_core.diffusion import Normalizer, TrainConfig, train
     from ecahd_core.model_zoo import model_meta, recipe, training_arrays
 
@@ -87,11 +91,14 @@ def train_one(kind: str, dataset, *, out: Path, seed: int, device: str, steps: i
     arrays = training_arrays(kind, dataset)
     steps = steps or max(1, int(round(r.steps * steps_scale)))
     warmup = warmup if warmup is not None else int(round(r.warmup_steps * min(1.0, steps_scale)))
+    if time_limit_s is not None:
+        steps = int(steps * STEP_CAP)
     config = r.denoiser_config(max(arrays))
     tc = TrainConfig(steps=steps, batch_size=batch_size or r.batch_for(max(arrays)),
                      warmup_steps=warmup,
                      lr=r.lr, ema_decay=r.ema_decay, seed=seed, device=device,
-                     log_every=max(1, min(100, steps // 20)), precision=precision)
+                     log_every=max(1, min(100, steps // 20)), precision=precision,
+                     time_limit_s=time_limit_s)
     normalizer = Normalizer.from_bounds(*dataset.grid().bounds)
     n = sum(len(a) for a in arrays.values())
     log.info("training %s: %d trajectories, horizons %s, %d steps x batch %d on %s (%s)",
@@ -171,10 +178,14 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-# share of a --minutes budget left to training that the step-time estimate may fill: the
-# estimate ran 2-8% short in quiet full runs and 15-45% short with tests beside them
-# (docs/RESULTS.md), and checkpoints take their time too
-BUDGET_FILL = 0.85
+# share of a --minutes budget left after the dataset that training fills: each model trains
+# until its share of it is spent (TrainConfig.time_limit_s), whatever the machine's load; the
+# rest covers each model's set-up and checkpoints
+BUDGET_FILL = 0.96
+# with a time limit, the most steps a model may take, x the steps its measured step time
+# predicts for its share: the 3 s step-time probe read 1.6x slow once with other work beside
+# it (docs/RESULTS.md); the time limit, not this cap, is meant to stop training
+STEP_CAP = 3.0
 
 
 def budget_scale(seconds_left: float, recipe_seconds: dict) -> float:
@@ -247,21 +258,34 @@ def run_all(args: argparse.Namespace) -> int:
     print(f"dataset: {dataset.num_pairs} pairs, {waypoint_rule(dataset)} waypoints -> "
           f"{data_path} ({times['dataset']:.0f} s); "
           + (f"{args.minutes:g} min budget: recipes' steps x {scale:.3g} ("
-             + ", ".join(f"{k.upper()} {steps[k]}" for k in args.kinds) + "); "
+             + ", ".join(f"{k.upper()} {steps[k]}" for k in args.kinds)
+             + " by the step times; each model stops when its share of the time is spent); "
              if args.minutes is not None else "")
           + f"ETA {_clock(train_s)} (~{_duration(train_s)} of training)", flush=True)
+    deadline = t_start + times["dataset"] + (BUDGET_FILL * (args.minutes * 60 - times["dataset"])
+                                            if args.minutes is not None else 0.0)
     for kind in args.kinds:
         t0 = time.perf_counter()
+        limit = None
+        if args.minutes is not None:  # this model's share of the time left
+            todo = [k for k in args.kinds if k not in times]
+            limit = max(1.0, (deadline - t0) * estimate[kind] / sum(estimate[k] for k in todo))
         ship = out_dir / shipped_path(grid.name, kind).name
         result = train_one(kind, dataset, out=work / f"{grid.name}_{kind}.pt", seed=args.seed,
                            device=args.device, steps_scale=scale, ship=ship,
-                           precision=precision,
+                           precision=precision, time_limit_s=limit,
                            progress=not args.no_progress)
         times[kind] = time.perf_counter() - t0
         last = result.loss_history[-1][1] if result.loss_history else float("nan")
-        left = sum(estimate[k] for k in args.kinds if k not in times)
-        print(f"{kind}: {result.step} steps, final loss {last:.4f}, {times[kind]:.0f} s "
-              f"(estimated {estimate[kind]:.0f} s) -> {ship}"
+        todo = [k for k in args.kinds if k not in times]
+        left = (max(0.0, deadline - time.perf_counter()) if limit is not None
+                else sum(estimate[k] for k in todo)) if todo else 0.0
+        print(f"{kind}: {result.step} steps"
+              + (f" (estimated {steps[kind]}, {result.step / steps[kind]:.2f}x)"
+                 if limit is not None else "")
+              + f", final loss {last:.4f}, {times[kind]:.0f} s "
+              f"({'time limit' if limit is not None else 'estimated'} "
+              f"{limit if limit is not None else estimate[kind]:.0f} s) -> {ship}"
               + (f"; ETA {_clock(left)}" if left else ""), flush=True)
     total = time.perf_counter() - t_start
     print("wall time: " + ", ".join(f"{k} {v:.0f} s" for k, v in times.items())

@@ -42,6 +42,7 @@ import copy
 import dataclasses
 import logging
 import os
+import time
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from enum import Enum
@@ -87,7 +88,8 @@ class TrainConfig:
     """Training settings.
 
     Attributes:
-        steps: total optimiser steps (a resumed run continues up to this number).
+        steps: total optimiser steps (a resumed run continues up to this number); with
+            ``time_limit_s``, the most it may take.
         batch_size: global batch (split evenly over DDP ranks).
         lr, betas, weight_decay: AdamW (paper values by default).
         warmup_steps: linear learning-rate warm-up length (paper: 5000).
@@ -107,6 +109,12 @@ class TrainConfig:
             state and EMA in float32). On a CPU with native bfloat16 (AVX512-BF16 or AMX) a step
             of the SD recipe took 0.65x the float32 time (docs/RESULTS.md); without it,
             bfloat16 is emulated and slower. ``threads.resolve_precision`` picks for "auto".
+        time_limit_s: [s] stop at the first step that ends this long after the first step
+            began (under DDP: at the first ``log_every`` boundary past it, on every rank
+            together), even short of ``steps``; None: run all ``steps``. The learning rate is
+            constant after the warm-up, so a run stopped early is a shorter run of the same
+            recipe. ``ecahd train-all --minutes`` uses it so that a machine slowed by other
+            work trains fewer steps instead of overrunning, and a fast one more.
     """
 
     steps: int
@@ -124,6 +132,7 @@ class TrainConfig:
     inpaint_goal: bool = True
     schedule: ScheduleConfig = field(default_factory=ScheduleConfig)
     precision: str = "fp32"
+    time_limit_s: float | None = None
 
     def __post_init__(self) -> None:
         if self.precision not in PRECISIONS:
@@ -139,6 +148,9 @@ class TrainConfig:
                                  f"got {getattr(self, name)!r}")
         if not self.lr > 0:
             raise ValueError(f"TrainConfig.lr must be positive, got {self.lr}")
+        if self.time_limit_s is not None and not float(self.time_limit_s) > 0:
+            raise ValueError(f"TrainConfig.time_limit_s must be positive or None, "
+                             f"got {self.time_limit_s}")
         if not 0.0 <= self.ema_decay < 1.0:
             raise ValueError(f"TrainConfig.ema_decay must be in [0, 1), got {self.ema_decay}")
         object.__setattr__(self, "betas", tuple(float(b) for b in self.betas))
@@ -534,6 +546,7 @@ def _train(model_config: DenoiserConfig, arrays: Mapping[int, Any], normalizer: 
     autocast = torch.autocast(device.type, dtype=torch.bfloat16,
                               enabled=cfg.precision == "bf16")
     model.train()
+    n_updates, t_loop = start_step, time.perf_counter()
     for step in range(start_step, cfg.steps):
         shared_gen.manual_seed(_seed_for(cfg.seed, step, 0))
         local_gen.manual_seed(_seed_for(cfg.seed, step, 1 + rank))
@@ -565,7 +578,9 @@ def _train(model_config: DenoiserConfig, arrays: Mapping[int, Any], normalizer: 
         window_loss += loss.detach()
         window_n += 1
         bar.update(1)
-        if n_updates % cfg.log_every == 0 or n_updates == cfg.steps:
+        out_of_time = _out_of_time(cfg, n_updates, start_step, t_loop, bar, world, device)
+        if window_n and (n_updates % cfg.log_every == 0 or n_updates == cfg.steps
+                         or out_of_time):
             mean = window_loss / window_n
             if world > 1:
                 dist.all_reduce(mean)
@@ -577,9 +592,13 @@ def _train(model_config: DenoiserConfig, arrays: Mapping[int, Any], normalizer: 
         if (cfg.checkpoint_every and n_updates % cfg.checkpoint_every == 0
                 and n_updates < cfg.steps and rank == 0):
             make_checkpoint(n_updates).save(out_path)
+        if out_of_time:
+            log.info("train %s: time limit %.0f s reached at step %d of at most %d", kind,
+                     cfg.time_limit_s, n_updates, cfg.steps)
+            break
     bar.close()
 
-    final_step = max(start_step, cfg.steps)
+    final_step = n_updates
     checkpoint = None
     if rank == 0:
         checkpoint = make_checkpoint(final_step)
@@ -591,6 +610,29 @@ def _train(model_config: DenoiserConfig, arrays: Mapping[int, Any], normalizer: 
     return TrainResult(path=out_path, step=final_step, loss_history=tuple(history),
                        ema_model=as_noise_predictor(ema, schedule.alphas_cumprod),
                        checkpoint=checkpoint)
+
+
+def _out_of_time(cfg: TrainConfig, n_updates: int, start_step: int, t_loop: float, bar: tqdm,
+                 world: int, device: torch.device) -> bool:
+    """Whether a run with ``cfg.time_limit_s`` stops after step ``n_updates``; keeps the
+    progress bar's total at the steps the limit leaves room for, at the rate so far. Under DDP
+    the ranks decide together at ``log_every`` boundaries."""
+    if cfg.time_limit_s is None or n_updates >= cfg.steps:
+        return False
+    if world > 1 and n_updates % cfg.log_every:
+        return False
+    elapsed = time.perf_counter() - t_loop
+    done = n_updates - start_step
+    stop = elapsed >= cfg.time_limit_s
+    if world > 1:
+        flag = torch.tensor(float(stop), device=device)
+        dist.all_reduce(flag, op=dist.ReduceOp.MAX)
+        stop = bool(flag.item())
+    if not stop and done % 20 == 0:
+        fit = n_updates + int((cfg.time_limit_s - elapsed) * done / max(elapsed, 1e-9))
+        bar.total = min(cfg.steps, max(fit, n_updates + 1))
+        bar.refresh()
+    return stop
 
 
 def _cpu_state(state: Mapping[str, Tensor]) -> dict[str, Tensor]:
