@@ -7,9 +7,7 @@ office"). No local plan that ends in a wall is free, whatever DD and polishing d
 :class:`WaypointPlacer` moves each such waypoint to a pose the footprint clears, within
 ``reach``, choosing among the free positions the one whose straight legs to its neighbours
 cross the fewest walls (then the nearest): a waypoint pushed out of a wall on the wrong side
-would leave its segments crossing that wall. Then leg repair (:meth:`WaypointPlacer.repair`)
-mends each straight leg that still crosses a wall: its end moved to where the leg crosses none
-(a free waypoint behind a wall), or one or two new waypoints round the wall.
+would leave its segments crossing that wall.
 
 Cost: one distance transform of the map (built once per map, ~40 ms on 2000 x 2000 cells) and,
 for each waypoint in a wall, a lattice of candidate positions judged by the exact checker near
@@ -34,8 +32,6 @@ REPAIR_REACH = 3.0
 REPAIR_CANDIDATES = 30  # lattice steps across a repair reach at most (a coarser step beyond)
 # candidates per side the two-bend repair pairs up (TWO_BEND_SAMPLES^2 legs judged at most)
 TWO_BEND_SAMPLES = 48
-# 'crosses less wall than this' [m]: crosses none (wall lengths are 0 or at least a sample's)
-_NO_WALL = 1e-9
 
 
 class WaypointPlacer:
@@ -52,14 +48,11 @@ class WaypointPlacer:
             its lattice step is at least repair_reach / REPAIR_CANDIDATES.
         two_bends: where no single new waypoint makes a leg cross less wall, :meth:`repair`
             tries two (:meth:`_two_bends`, on the same lattice).
-        relocate: :meth:`repair` may move a leg's end (not the plan's last waypoint) to where
-            the leg crosses no wall, before bending it (:meth:`_relocated`).
     """
 
     def __init__(self, grid, footprint, *, reach: float = PLACE_REACH,
                  step: float | None = None, leg_rounds: int = LEG_ROUNDS,
-                 repair_reach: float | None = None, two_bends: bool = True,
-                 relocate: bool = True) -> None:
+                 repair_reach: float | None = None, two_bends: bool = True) -> None:
         from ecahd_core.sensing import StaticClearance
 
         if not (math.isfinite(reach) and reach > 0):
@@ -70,7 +63,7 @@ class WaypointPlacer:
         if leg_rounds < 0:
             raise EcahdError(f"leg_rounds must be >= 0, got {leg_rounds}")
         self.leg_rounds = int(leg_rounds)
-        self.two_bends, self.relocate = bool(two_bends), bool(relocate)
+        self.two_bends = bool(two_bends)
         self.repair_reach = (max(self.reach, REPAIR_REACH) if repair_reach is None
                              else float(repair_reach))
         if not (math.isfinite(self.repair_reach) and self.repair_reach > 0):
@@ -154,69 +147,39 @@ class WaypointPlacer:
     def repair(self, waypoints, *, rounds: int | None = None,
                legs: int | None = None) -> tuple[np.ndarray, int]:
         """Leg repair (ours): every straight leg that passes nearer a wall than the footprint
-        fits (:meth:`wall_length` > 0) is mended, by the first of these that works:
-
-        1. (``relocate``; the leg's end one of the plan's own waypoints, not its last nor one
-           a repair added) its end moves, within ``repair_reach``, to where the leg crosses no
-           wall (:meth:`_relocated`): SD's waypoint on the wrong side of a wall, which no bend
-           reaches without a long detour;
-        2. a new waypoint, its midpoint placed (within half the leg's length, at most
-           ``repair_reach``) where the two new legs cross the least wall, kept only if that is
-           less than the old leg's;
-        3. two new waypoints (:meth:`_two_bends`, when ``two_bends``);
-        4. (as 1.) its end moves to where the leg crosses less wall.
-
-        A leg's mending depends on its own ends only. ``rounds`` (default ``leg_rounds``) times.
+        fits (:meth:`wall_length` > 0) gets a new waypoint, its midpoint placed (within half the
+        leg's length, at most ``reach``) where the two new legs cross the least wall; kept only
+        if that is less than the old leg's; where no single waypoint does, two
+        (:meth:`_two_bends`, when ``two_bends``). ``rounds`` (default ``leg_rounds``) times.
         ``legs``: only the first ``legs`` legs, and what they become (None: every leg; a
         re-plan that follows only its first leg needs no more, and gets the same first leg).
-        waypoints: (P, 2) [m] -> ((P', 2) [m], waypoints added (P' - P) or moved); the plan's
-        ends stay."""
+        waypoints: (P, 2) [m] -> ((P', 2) [m], P' - P waypoints added); the ends stay."""
         xy = np.asarray(waypoints, dtype=np.float64).reshape(-1, 2)
-        added = relocated = 0
+        added = 0
         span = len(xy) - 1 if legs is None else min(int(legs), len(xy) - 1)  # legs to repair
-        # the waypoints a leg's end may move to: the plan's own (not one a repair added, whose
-        # legs were chosen together), not its ends
-        own = np.zeros(len(xy), dtype=bool)
-        own[1:-1] = self.relocate
         for _ in range(self.leg_rounds if rounds is None else rounds):
             if len(xy) < 2:
                 break
             walls = self.leg_walls(xy[:span + 1])  # (span,)
             if not (walls > 0).any():
                 break
-            xy = xy.copy()  # relocation moves a leg's end in place
-            pieces, kinds, grown = [xy[:1]], [own[:1]], 0
+            pieces, grown = [xy[:1]], 0
             for k in range(len(xy) - 1):
                 a, b = xy[k], xy[k + 1]
-                mid = None
                 if k < span and walls[k] > 0:
-                    movable = bool(own[k + 1])
-                    # 1. the leg's end to where the leg crosses no wall, 2. one bend, 3. two,
-                    # 4. the end to where the leg crosses less wall
-                    moved = self._relocated(a, b, need=_NO_WALL) if movable else None
-                    if moved is None:
-                        reach = min(self.repair_reach, 0.5 * float(np.linalg.norm(b - a)))
-                        mid = self._best(0.5 * (a + b), self._repair_lattice(reach), a, b,
-                                         need=walls[k])
-                        if mid is None and self.two_bends:
-                            mid = self._two_bends(a, b, need=walls[k])
-                        if mid is None and movable:
-                            moved = self._relocated(a, b, need=walls[k])
-                    if moved is not None:  # the next leg starts from the moved end
-                        xy[k + 1] = b = moved
-                        relocated += 1
-                        if k + 1 < span:
-                            walls[k + 1] = self.wall_length(b, xy[k + 2])[0]
+                    reach = min(self.repair_reach, 0.5 * float(np.linalg.norm(b - a)))
+                    mid = self._best(0.5 * (a + b), self._repair_lattice(reach), a, b,
+                                     need=walls[k])
+                    if mid is None and self.two_bends:
+                        mid = self._two_bends(a, b, need=walls[k])
                     if mid is not None:
                         mid = mid.reshape(-1, 2)
                         pieces.append(mid)
-                        kinds.append(np.zeros(len(mid), dtype=bool))
                         grown += len(mid)
                 pieces.append(b[None])
-                kinds.append(own[k + 1:k + 2])
-            xy, own = np.concatenate(pieces), np.concatenate(kinds)
+            xy = np.concatenate(pieces)
             span, added = span + grown, added + grown
-        return xy, added + relocated
+        return xy, added
 
     def _two_bends(self, a: np.ndarray, b: np.ndarray, *, need: float) -> np.ndarray | None:
         """Two new waypoints (2, 2) [m] for the leg a -> b, m1 seen from ``a`` and m2 seen from
@@ -256,12 +219,6 @@ class WaypointPlacer:
             if (self.clearance.depths(pose, self.footprint) <= DEFAULT_TOLERANCE).all():
                 return path[1:3]
         return None
-
-    def _relocated(self, a: np.ndarray, b: np.ndarray, *, need: float) -> np.ndarray | None:
-        """The leg a -> b's end moved within ``repair_reach``: the free pose that
-        :meth:`_best` scores best for the leg from ``a`` alone (LEG_WEIGHT x wall + distance
-        from ``b``), if its leg crosses less wall than ``need`` [m]; else None."""
-        return self._best(b, self._repair_lattice(self.repair_reach), a, None, need=need)
 
     def leg_walls(self, xy: np.ndarray) -> np.ndarray:
         """(P, 2) [m] -> (P - 1,) :meth:`wall_length` of each straight leg."""

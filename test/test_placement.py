@@ -132,10 +132,7 @@ def test_a_wider_repair_reach_finds_a_door_away_from_the_leg():
     assert placer.repair_reach == 3.0
     far, added = placer.repair(leg)
     assert added >= 1 and check_collision(far, robot, grid).collision_free
-    # through the door: the leg that crosses y = 3 m does so within it
-    (k,), = np.nonzero((far[:-1, 1] < 3.0) != (far[1:, 1] < 3.0))
-    (ax, ay), (bx, by) = far[k], far[k + 1]
-    assert 7.2 < ax + (3.0 - ay) * (bx - ax) / (by - ay) < 8.2
+    assert any(7.2 < x < 8.2 and 2.5 < y < 3.5 for x, y in far[1:-1])  # through the door
     with pytest.raises(EcahdError, match="leg repair's reach"):
         WaypointPlacer(grid, robot, repair_reach=0.0)
 
@@ -160,47 +157,16 @@ def test_two_bends_take_a_leg_round_the_end_of_a_wall_that_no_single_bend_clears
 
 
 def test_repairing_only_the_first_legs_gives_those_legs_as_a_full_repair_does():
-    """``legs=1``: the first leg is mended exactly as when every leg is repaired; the others
-    stay. With bends only, and with relocation (which moves the first leg's end here)."""
+    """``legs=1``: the first leg is bent exactly as when every leg is repaired; the others stay."""
     grid, robot = block_map(0.05), make_footprint("circle")
     # both legs cross the block: bottom corridor -> top corridor -> bottom corridor
     plan = np.array([[0.5, 0.75], [3.0, 3.25], [5.5, 0.75]])
-    bends = WaypointPlacer(grid, robot, reach=1.5, leg_rounds=4, relocate=False)
-    full, n_full = bends.repair(plan)
-    first, n_first = bends.repair(plan, legs=1)
+    placer = WaypointPlacer(grid, robot, reach=1.5, leg_rounds=4)
+    full, n_full = placer.repair(plan)
+    first, n_first = placer.repair(plan, legs=1)
     assert 0 < n_first < n_full
     k = int(np.flatnonzero((first == plan[1]).all(axis=1))[0])  # where the first leg ends
     np.testing.assert_array_equal(first[:k + 1], full[:k + 1])
     np.testing.assert_array_equal(first[k:], plan[1:])  # the second leg as it was
-    none, n_none = bends.repair(plan, legs=0)
+    none, n_none = placer.repair(plan, legs=0)
     assert n_none == 0 and np.array_equal(none, plan)
-    placer = WaypointPlacer(grid, robot, reach=1.5, leg_rounds=4)
-    full, _ = placer.repair(plan)
-    first, _ = placer.repair(plan, legs=1)
-    k = len(first) - len(plan) + 1  # the first leg's end (moved: not plan[1])
-    assert not np.array_equal(first[k], plan[1])
-    np.testing.assert_array_equal(first[:k + 1], full[:k + 1])
-    np.testing.assert_array_equal(first[k + 1:], plan[2:])
-
-
-def test_a_leg_end_behind_a_wall_moves_to_where_the_leg_crosses_none():
-    """SD's waypoint just behind a long wall (the door far beyond any bend's reach): the
-    waypoint moves to this side of the wall, the leg is free, and no waypoint is added; the
-    plan's last waypoint never moves, and points a repair added are not moved again."""
-    res = 0.05
-    data = np.zeros((int(6 / res), int(20 / res)), dtype=np.int8)
-    data[int(2.9 / res):int(3.1 / res), :int(18 / res)] = 100  # a wall along y = 3, door x > 18
-    grid, robot = GridMap(data, res, (0.0, 0.0), name="wall"), make_footprint("circle")
-    plan = np.array([[2.0, 1.0], [8.0, 3.6], [12.0, 1.0]])  # the middle one just above the wall
-    xy, changed = WaypointPlacer(grid, robot, leg_rounds=3).repair(plan)
-    assert changed == 1 and len(xy) == 3
-    np.testing.assert_array_equal(xy[[0, -1]], plan[[0, -1]])
-    assert xy[1, 1] < 2.9 and np.linalg.norm(xy[1] - plan[1]) <= 3.0
-    assert check_collision(xy, robot, grid).collision_free
-    # without relocation the bends cannot reach the door: the plan still crosses the wall
-    bent, _ = WaypointPlacer(grid, robot, leg_rounds=3, relocate=False).repair(plan)
-    assert not check_collision(bent, robot, grid).collision_free
-    # the goal behind the wall stays where it is
-    goal = np.array([[2.0, 1.0], [8.0, 3.6]])
-    kept, _ = WaypointPlacer(grid, robot, leg_rounds=3).repair(goal)
-    np.testing.assert_array_equal(kept[[0, -1]], goal)
