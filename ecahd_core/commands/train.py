@@ -262,13 +262,13 @@ def run_all(args: argparse.Namespace) -> int:
              + " by the step times; each model stops when its share of the time is spent); "
              if args.minutes is not None else "")
           + f"ETA {_clock(train_s)} (~{_duration(train_s)} of training)", flush=True)
-    deadline = t_start + times["dataset"] + (BUDGET_FILL * (args.minutes * 60 - times["dataset"])
-                                            if args.minutes is not None else 0.0)
+    deadline = (t_start + times["dataset"] + BUDGET_FILL * (args.minutes * 60 - times["dataset"])
+                if args.minutes is not None else None)
+    todo = list(args.kinds)
     for kind in args.kinds:
         t0 = time.perf_counter()
         limit = None
-        if args.minutes is not None:  # this model's share of the time left
-            todo = [k for k in args.kinds if k not in times]
+        if deadline is not None:  # this model's share of the time left
             limit = max(1.0, (deadline - t0) * estimate[kind] / sum(estimate[k] for k in todo))
         ship = out_dir / shipped_path(grid.name, kind).name
         result = train_one(kind, dataset, out=work / f"{grid.name}_{kind}.pt", seed=args.seed,
@@ -277,7 +277,7 @@ def run_all(args: argparse.Namespace) -> int:
                            progress=not args.no_progress)
         times[kind] = time.perf_counter() - t0
         last = result.loss_history[-1][1] if result.loss_history else float("nan")
-        todo = [k for k in args.kinds if k not in times]
+        todo.remove(kind)
         left = (max(0.0, deadline - time.perf_counter()) if limit is not None
                 else sum(estimate[k] for k in todo)) if todo else 0.0
         print(f"{kind}: {result.step} steps"

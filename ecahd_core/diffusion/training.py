@@ -579,8 +579,7 @@ def _train(model_config: DenoiserConfig, arrays: Mapping[int, Any], normalizer: 
         window_n += 1
         bar.update(1)
         out_of_time = _out_of_time(cfg, n_updates, start_step, t_loop, bar, world, device)
-        if window_n and (n_updates % cfg.log_every == 0 or n_updates == cfg.steps
-                         or out_of_time):
+        if n_updates % cfg.log_every == 0 or n_updates == cfg.steps or out_of_time:
             mean = window_loss / window_n
             if world > 1:
                 dist.all_reduce(mean)
