@@ -16,6 +16,7 @@ walls and scored on the distance transform.
 from __future__ import annotations
 
 import math
+from functools import cached_property
 
 import numpy as np
 
@@ -29,6 +30,9 @@ LEG_ROUNDS = 3  # rounds of leg repair (a leg crossing a wall gets a placed midp
 # end a few metres from where SD's leg crosses a wall. 3 m took ECAHD alone on warehouse 2 from
 # 89.1% to 94.8% of 192 held-out plans (docs/RESULTS.md, 2026-12-03 06:34)
 REPAIR_REACH = 3.0
+# more SD batches a re-plan may draw for a first leg that crosses no wall, one waypoint more each
+# (planner.SparseConfig.leg_batches; office 2, 32 development plans: ECAHD alone 56% -> 88%)
+LEG_BATCHES = 3
 REPAIR_CANDIDATES = 30  # lattice steps across a repair reach at most (a coarser step beyond)
 # candidates per side the two-bend repair pairs up (TWO_BEND_SAMPLES^2 legs judged at most)
 TWO_BEND_SAMPLES = 48
@@ -273,18 +277,31 @@ class WaypointPlacer:
         transform of cell centres, less half a cell diagonal; each leg sampled at
         ceil(length / resolution) + 1 evenly spaced points, so a leg's value does not depend on
         the others) -> (K,)."""
+        grid = self.grid
+        res, (ox, oy) = grid.resolution, grid.origin[:2]
         b = np.asarray(b, dtype=np.float64).reshape(-1, 2)
         a = np.broadcast_to(np.asarray(a, dtype=np.float64), b.shape)
-        length = np.linalg.norm(b - a, axis=1)  # (K,)
-        counts = np.ceil(length / self.grid.resolution).astype(np.int64) + 1  # (K,) >= 1
+        d = b - a
+        length = np.linalg.norm(d, axis=1)  # (K,)
+        counts = np.ceil(length / res).astype(np.int64) + 1  # (K,) >= 1
         counts = np.maximum(counts, 2)
         n = int(counts.max(initial=2))
         j = np.arange(n)[None, :]  # (1, n)
         valid = j < counts[:, None]  # (K, n)
         t = np.minimum(j / (counts[:, None] - 1), 1.0)  # (K, n)
-        pts = a[:, None, :] + t[:, :, None] * (b - a)[:, None, :]  # (K, n, 2)
-        near = self.clearance.wall_distance(pts.reshape(-1, 2)).reshape(len(b), n) < self._near
+        # each sample's cell, as GridMap.world_to_cell; off the map (or NaN): the near border
+        col = np.fmin(np.fmax(np.floor((a[:, :1] + t * d[:, :1] - ox) / res), -1), grid.width)
+        row = np.fmin(np.fmax(np.floor((a[:, 1:] + t * d[:, 1:] - oy) / res), -1), grid.height)
+        idx = (row.astype(np.intp) + 1) * (grid.width + 2) + col.astype(np.intp) + 1
+        near = self._near_cells.take(idx)  # (K, n)
         return (near & valid).sum(axis=1) / counts * length
+
+    @cached_property
+    def _near_cells(self) -> np.ndarray:
+        """Flat (H + 2) (W + 2) bool: a cell (a border of off-map cells round the map) whose
+        centre lies nearer an occupied cell centre than ``_near`` (:meth:`wall_length`'s test,
+        the same as ``StaticClearance.wall_distance(...) < _near``)."""
+        return np.pad(self.grid.free_distance < self._near, 1, constant_values=True).ravel()
 
 
 def _spread(points: np.ndarray, n: int) -> np.ndarray:

@@ -19,7 +19,12 @@ import torch
 
 from ecahd_core.errors import EcahdError
 from ecahd_core.navigation import REPLAN_POLICIES, check_replan_spacing, replan_horizon
+from ecahd_core.placement import LEG_BATCHES
 
+# of each batch's candidates whose first leg crosses a wall as sampled, how many SD's
+# free-first-leg rule (SparseConfig.leg_batches) sends through placement and repair (tens of ms
+# each): on office 2's 32 development plans 0 left 11 colliding, 2 left 4, 4 left 7
+LEG_REPAIRS = 2
 SELECTION_RULES = ("shortest_reaching", "collision_aware")
 
 
@@ -62,6 +67,15 @@ class SparseConfig:
             1 as written). A goal's first plan always samples from noise.
         precision: "fp32", "bf16" or "auto" (bf16 where the CPU computes it natively): the
             SD Transformer's inference precision (``SamplerConfig.precision``; ours).
+        leg_batches: a free first leg (ours, beyond the paper; needs the ``placer``, and acts on
+            re-plans whose caller follows only the first leg, ``repair_legs`` 1, as Algorithm
+            1's every_waypoint loop does). When the selected candidate's first leg, after
+            placement and leg repair, still passes nearer a wall than the footprint fits, the
+            other candidates are tried in the rule's order and the first whose first leg is
+            free is taken; if none is, up to ``leg_batches`` more batches of N are drawn, each
+            with one waypoint more than the last up to the model's longest horizon (a straight
+            last leg into the next room becomes a plan with a waypoint to place in the door). 0: only the first batch's
+            other candidates; -1: off (the selected candidate, as the paper).
     """
 
     num_candidates: int = 10
@@ -78,8 +92,11 @@ class SparseConfig:
     densify_rounds: int = 2
     warm_fraction: float = 0.0
     precision: str = "fp32"
+    leg_batches: int = LEG_BATCHES
 
     def __post_init__(self) -> None:
+        if self.leg_batches < -1:
+            raise EcahdError(f"leg_batches must be >= -1 (-1: off), got {self.leg_batches}")
         if self.max_spacing is not None and not (np.isfinite(self.max_spacing)
                                                  and self.max_spacing > 0):
             raise EcahdError(f"max_spacing must be None (off) or a finite number > 0 m, "
@@ -125,6 +142,19 @@ def select_best(candidates: np.ndarray, goal: np.ndarray, *, epsilon: float = 1.
     return int(idx[np.argmin(lengths[idx])])
 
 
+def rank_candidates(candidates: np.ndarray, goal: np.ndarray, *, epsilon: float = 1.0,
+                    rule: str = "shortest_reaching", collision_costs: np.ndarray | None = None,
+                    collision_tolerance: float = 0.1) -> list[int]:
+    """All N candidates (N, P, 2) [m], best first: :func:`select_best`'s choice, then the rest
+    by collision cost (``collision_aware``; none under the paper's rule), then length."""
+    first = select_best(candidates, goal, epsilon=epsilon, rule=rule,
+                        collision_costs=collision_costs, collision_tolerance=collision_tolerance)
+    lengths = path_lengths(np.asarray(candidates, dtype=np.float64))
+    keys = (lengths,) if rule != "collision_aware" else (lengths, np.asarray(collision_costs))
+    rest = [int(k) for k in np.lexsort(keys) if k != first]
+    return [first] + rest
+
+
 @dataclass(frozen=True)
 class SparsePlan:
     """Attributes:
@@ -134,6 +164,11 @@ class SparsePlan:
         collision_costs: (N,) J collision cost of each candidate (None if not computed).
         time_ms: sampling + selection wall time.
         placed: waypoints moved out of walls by the SparseDiffusion's ``placer`` (ours).
+        first_leg: what SparseConfig.leg_batches's rule did (ours): "" (it did not act: the
+            selected candidate's first leg was free, or the rule is off), "other" (another
+            candidate of the batch), "batch" (a candidate of a further batch, whose
+            ``candidates`` these are), "none" (no candidate's first leg was free; the selected
+            one stays).
     """
 
     waypoints: np.ndarray
@@ -142,6 +177,7 @@ class SparsePlan:
     collision_costs: np.ndarray | None
     time_ms: float
     placed: int = 0
+    first_leg: str = ""
 
 
 class SparseDiffusion:
@@ -237,12 +273,21 @@ class SparseDiffusion:
         legs = repair_legs if cfg.max_spacing is None else None
         waypoints, placed = (self._place(cands_np[best], legs=legs) if densify or horizon > 2
                              else (cands_np[best], 0))
+        first_leg = ""
+        if (densify and legs == 1 and cfg.leg_batches >= 0 and self.placer is not None
+                and self._leg_blocked(waypoints)):
+            found = self._free_first_leg(cands_np, col, best, start_t, goal_t, horizon,
+                                         generator)
+            first_leg = "none"
+            if found is not None:
+                first_leg = "other" if found[0] is cands_np else "batch"
+                cands_np, col, best, waypoints, placed = found
         if densify and cfg.max_spacing is not None:
             waypoints, more = self._place(self.densify(waypoints, generator=generator))
             placed += more
         return SparsePlan(waypoints=waypoints, candidates=cands_np, best=best,
                           collision_costs=col, time_ms=(time.perf_counter() - t0) * 1e3,
-                          placed=placed)
+                          placed=placed, first_leg=first_leg)
 
     def warm_up(self, xy, *, horizon: int | None = None) -> float:
         """One throwaway plan from ``xy`` (2,) [m] to itself with its own generator, so that the
@@ -261,6 +306,49 @@ class SparseDiffusion:
         if self.placer is None or len(waypoints) < 2:
             return waypoints, 0
         return self.placer(waypoints, legs=legs)
+
+    def _leg_blocked(self, waypoints: np.ndarray) -> bool:
+        """Whether the first leg of ``waypoints`` (P, 2) [m] passes nearer a wall than the
+        footprint fits (the placer's ``wall_length`` > 0)."""
+        return bool(self.placer.leg_walls(waypoints[:2])[0] > 0)
+
+    def _free_first_leg(self, cands: np.ndarray, col: np.ndarray | None, best: int,
+                        start: torch.Tensor, goal: torch.Tensor, horizon: int,
+                        generator: torch.Generator | None):
+        """SparseConfig.leg_batches: the first candidate, in the rule's order, whose first leg
+        after placement and repair is free; from ``cands`` (N, horizon, 2) [m] (``best``
+        already tried), then from up to ``leg_batches`` more batches of one waypoint more each.
+        Returns (candidates, collision costs, index, placed waypoints, moved) of the batch it
+        came from, or None."""
+        cfg = self.config
+        goal_np = goal.detach().cpu().numpy().astype(np.float64)
+        tried = {best}
+        for extra in range(cfg.leg_batches + 1):
+            if extra:
+                horizon = min(horizon + 1, self.sampler.model.config.max_horizon)
+                cands_t = self.sampler.sample(batch=cfg.num_candidates, horizon=horizon,
+                                              conditions={0: start, -1: goal},
+                                              generator=generator).trajectories
+                col = self._collision_costs(cands_t, goal)
+                cands = cands_t.detach().cpu().numpy().astype(np.float64)
+                tried = set()
+            order = [k for k in rank_candidates(cands, goal_np, epsilon=cfg.epsilon,
+                                                rule=cfg.selection, collision_costs=col,
+                                                collision_tolerance=cfg.collision_tolerance)
+                     if k not in tried]
+            # first the candidates whose first leg is free as sampled (one vectorised check),
+            # then the best few through placement and repair (a repair costs tens of ms)
+            straight = self.placer.wall_length(cands[order, 0], cands[order, 1]) == 0
+            order = ([k for k, ok in zip(order, straight) if ok]
+                     + [k for k, ok in zip(order, straight) if not ok][:LEG_REPAIRS])
+            for k in order:
+                # the first leg depends on the first three waypoints only (placement scores a
+                # waypoint by its legs to both neighbours; repair bends the first leg alone)
+                head, _ = self._place(cands[k, :3], legs=1)
+                if not self._leg_blocked(head):
+                    waypoints, placed = self._place(cands[k], legs=1)
+                    return cands, col, k, waypoints, placed
+        return None
 
     def _collision_costs(self, cands: torch.Tensor, goals: torch.Tensor) -> np.ndarray | None:
         """J's collision cost of candidates (B, P, 2) [m] towards goals (2,) or (B, 2) -> (B,),
@@ -430,6 +518,8 @@ class HierarchicalPlan:
             ``placer``, summed over the iterations' SD plans.
         exact_kept: per iteration, whether the exact rule (``HierarchicalPlanner``'s
             ``exact_check``) put back the segment's straight or unpolished DD plan.
+        first_leg: per iteration, :attr:`SparsePlan.first_leg` of its SD plan ("" for every
+            iteration of replan "once").
     """
 
     trajectory: np.ndarray
@@ -441,10 +531,16 @@ class HierarchicalPlan:
     polished: list = field(default_factory=list)
     placed: int = 0
     exact_kept: list = field(default_factory=list)
+    first_leg: list = field(default_factory=list)
 
     @property
     def dd_calls(self) -> int:
         return int(sum(self.dd_segments))
+
+    @property
+    def first_leg_changed(self) -> bool:
+        """Whether SparseConfig.leg_batches's rule changed any iteration's SD plan."""
+        return any(f in ("other", "batch") for f in self.first_leg)
 
 
 @dataclass(frozen=True)
@@ -786,7 +882,7 @@ class HierarchicalPlanner:
         G = torch.as_tensor(np.asarray(goal, dtype=np.float32))
         t_total = time.perf_counter()
         times = {"sd": 0.0}
-        global_plans, placed = [], 0
+        global_plans, placed, first_leg = [], 0, []
         if self.replan == "once":
             return self._plan_once(S, G, generator, t_total)
         # Algorithm 1 line 1: P^g - 1 iterations, the last one reaching G. With waypoint spacing
@@ -815,6 +911,7 @@ class HierarchicalPlanner:
             waypoints, placed = sparse.waypoints, placed + sparse.placed
             times["sd"] += (time.perf_counter() - t0) * 1e3
             global_plans.append(waypoints)
+            first_leg.append(sparse.first_leg)
             S = torch.as_tensor(waypoints[1], dtype=torch.float32)  # MoveAgent
             p += 1
             if len(waypoints) == 2:
@@ -824,7 +921,7 @@ class HierarchicalPlanner:
                                    end_fixed=torch.ones(p, dtype=torch.bool), joined=True,
                                    generator=generator)  # lines 13-18
         times.update(stages.timings_ms)
-        return self._result(global_plans, stages, times, t_total, placed)
+        return self._result(global_plans, stages, times, t_total, placed, first_leg)
 
     def _plan_once(self, S: torch.Tensor, G: torch.Tensor, generator, t_total: float
                    ) -> HierarchicalPlan:
@@ -844,11 +941,11 @@ class HierarchicalPlanner:
                                    joined=True, generator=generator)
         times.update(stages.timings_ms)
         return self._result([waypoints[p:] for p in range(len(waypoints) - 1)], stages, times,
-                            t_total, sparse.placed)
+                            t_total, sparse.placed, [""] * (len(waypoints) - 1))
 
     @staticmethod
     def _result(global_plans: list, stages: LocalStages, times: dict, t_total: float,
-                placed: int) -> HierarchicalPlan:
+                placed: int, first_leg: list) -> HierarchicalPlan:
         """The HierarchicalPlan of the iterations' SD plans and their local stages."""
         segments = [seg.numpy().astype(np.float64) for seg in stages.plans]
         traj = np.concatenate([segments[0]] + [sg[1:] for sg in segments[1:]])
@@ -858,7 +955,8 @@ class HierarchicalPlanner:
                                 local_costs=list(zip(stages.c_before.tolist(),
                                                      stages.c_after.tolist())),
                                 timings_ms=times, polished=stages.polished.tolist(),
-                                placed=placed, exact_kept=stages.exact_kept.tolist())
+                                placed=placed, exact_kept=stages.exact_kept.tolist(),
+                                first_leg=first_leg)
 
 
 class FullDiffusion:

@@ -91,6 +91,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from ecahd_core.errors import EcahdError, PlanningError
 from ecahd_core.navigation import (REPLAN_POLICIES, SNAP_DISTANCE, GlobalRunner,
                                    GlobalRunnerConfig, PlanRequest, validate_pose)
+from ecahd_core.placement import LEG_BATCHES
 from ecahd_core.planner import SELECTION_RULES, SparseConfig, SparseDiffusion, SparsePlan
 from ecahd_core.threads import PRECISION_CHOICES
 from ecahd_ros.conversions import msg_to_grid, timing_message, xy_to_path
@@ -125,6 +126,12 @@ PARAMETERS = [
     ParamSpec("repair_reach", -1.0, "[m] sd: leg repair looks this far from a leg's middle for "
                                     "its new waypoint (at most half the leg); -1 = the larger "
                                     "of place_reach and 3.0"),
+    ParamSpec("leg_batches", LEG_BATCHES, "sd, every_waypoint, with place_reach on: when the "
+                                          "chosen candidate's first leg still crosses a wall "
+                                          "after leg repair, the first of the other candidates "
+                                          "whose first leg does not, else up to this many more "
+                                          "batches of N (one waypoint more each); 0 = the "
+                                          "other candidates only; -1 = off"),
     ParamSpec("ddim_steps", 0, "DDIM steps of SD or FD; 0 = the checkpoint's"),
     ParamSpec("epsilon", 1.0, "[m] goal-reaching radius of the best-of-N rule"),
     ParamSpec("selection", "collision_aware", f"best-of-N rule: {list(SELECTION_RULES)} "
@@ -180,6 +187,7 @@ class GlobalPlannerParams:
     place_reach: float
     leg_repair: int
     repair_reach: float
+    leg_batches: int
     ddim_steps: int
     epsilon: float
     selection: str
@@ -211,6 +219,7 @@ class GlobalPlannerParams:
         require_cost_margin(self)
         require(self.repair_reach > 0 or self.repair_reach == -1, "repair_reach",
                 self.repair_reach, "> 0 m, or -1 (the larger of place_reach and 3.0)")
+        require(self.leg_batches >= -1, "leg_batches", self.leg_batches, ">= -1 (-1: off)")
         require(self.place_reach >= 0 or self.place_reach == -1, "place_reach",
                 self.place_reach, ">= 0 m, or -1 (by the map's size)")
         require(self.replan_spacing >= 0 or self.replan_spacing == -1, "replan_spacing",
@@ -247,7 +256,7 @@ class GlobalPlannerParams:
                             num_steps=self.ddim_steps or None,
                             max_spacing=self.max_spacing or None,
                             warm_fraction=self.warm_fraction,
-                            precision=self.inference_precision)
+                            precision=self.inference_precision, leg_batches=self.leg_batches)
 
 
 def candidate_markers(plan: SparsePlan, frame_id: str, stamp) -> MarkerArray:
@@ -479,6 +488,13 @@ class GlobalPlanner(Node):
         """What tells fused grids apart for the caches: None for the static map."""
         return None if grid is self.grid else grid.occupied.tobytes()
 
+    def _placement_on(self) -> bool:
+        """Whether place_reach (-1: by the map) moves waypoints farther than the goal snap."""
+        from ecahd_core.placement import auto_reach
+
+        p = self.params
+        return (auto_reach(self.grid) if p.place_reach < 0 else p.place_reach) > SNAP_DISTANCE
+
     def _placer(self):
         """The WaypointPlacer on :meth:`_fused_grid` (its distance transform is built once per
         fused grid)."""
@@ -489,7 +505,7 @@ class GlobalPlanner(Node):
         if self._placer_cache is None or self._placer_cache[0] != key:
             p = self.params
             reach = auto_reach(self.grid) if p.place_reach < 0 else p.place_reach
-            on = reach > SNAP_DISTANCE  # off: the 0.2 m snap, no waypoint added
+            on = self._placement_on()  # off: the 0.2 m snap, no waypoint added
             self._placer_cache = (key, WaypointPlacer(
                 grid, self.judged, reach=reach if on else SNAP_DISTANCE,
                 leg_rounds=p.leg_repair if on else 0,
@@ -540,14 +556,20 @@ class GlobalPlanner(Node):
             saved = self.sparse.cost
             if saved is not None:  # weigh the candidates by J with the scanned obstacles too
                 self.sparse.cost = self._fused_cost()
+            # the robot follows the first leg to the next re-plan: SD's rule for a free first
+            # leg (leg_batches) judges it with the placer on the map and the remembered obstacles
+            first_leg = self.params.replan == "every_waypoint" and self._placement_on()
+            if first_leg:
+                self.sparse.placer = self._placer()
             try:
                 # a re-plan at a reached waypoint may start from the rest of the current plan
                 # (warm_fraction; from noise when 0, bit for bit)
                 previous = self.runner.waypoints if request.reason == "waypoint" else None
                 result = self.sparse.replan(start, goal, previous, horizon=request.horizon,
-                                            generator=self.generator)
+                                            generator=self.generator,
+                                            repair_legs=1 if first_leg else None)
             finally:
-                self.sparse.cost = saved
+                self.sparse.cost, self.sparse.placer = saved, None
             waypoints, ms = result.waypoints.copy(), result.time_ms
             detail = f" (candidate {result.best} of {len(result.candidates)})"
             if self._crosses_remembered(waypoints):  # SD cannot see round it: detour now

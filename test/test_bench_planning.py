@@ -43,11 +43,12 @@ def test_bench_planning_figure_on_a_nav2_yaml_map(tmp_path):
 def test_bench_defaults_follow_the_planner():
     # the bench module avoids importing torch at parser-build time, so it restates two defaults
     from ecahd_core.bench.planning import PlanningBenchSettings
-    from ecahd_core.planner import DenseConfig
+    from ecahd_core.planner import DenseConfig, SparseConfig
 
     assert PlanningBenchSettings().guidance_weight == DenseConfig().guidance_weight
     assert PlanningBenchSettings().guidance_space == DenseConfig().guidance_space
     assert PlanningBenchSettings().c_th == DenseConfig().c_th
+    assert PlanningBenchSettings().leg_batches == SparseConfig().leg_batches
 
 
 def test_safety_net_is_reported_beside_hd_and_leaves_its_numbers_alone():
@@ -73,8 +74,10 @@ def test_safety_net_is_reported_beside_hd_and_leaves_its_numbers_alone():
         assert 0 <= b["net_resample_rate"] <= 100
         assert b["net_retry_rate"] + b["net_resample_rate"] + b["net_fallback_rate"] \
             + b["net_unsafe_rate"] == pytest.approx(100.0 - b["collision_free"])
+        assert b["first_leg_rate"] == 0.0  # replan once: every leg is SD's first plan's
     text = format_markdown(runs[True])
     assert "safety net" in text and "resample %" in text and "fallback %" in text
+    assert "first leg %" in text
     assert "safety net" not in format_markdown(runs[False])
 
 

@@ -224,7 +224,7 @@ def test_same_seed_reproduces_the_plan(rig):
                                         ("selection", "random"), ("epsilon", -1.0),
                                         ("warm_fraction", 1.5), ("replan_spacing", -2.0),
                                         ("cost_margin", 0.0), ("cost_margin", -0.5),
-                                        ("repair_reach", 0.0)])
+                                        ("repair_reach", 0.0), ("leg_batches", -2)])
 def test_bad_parameters_are_named(name, value):
     values = {spec.name: spec.default for spec in PARAMETERS}  # the declared defaults
     values[name] = value

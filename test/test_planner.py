@@ -386,7 +386,9 @@ def test_every_waypoint_repairs_only_the_followed_leg_and_plans_the_same():
 
     fp = make_footprint("circle")
     cc = CostConfig()
-    sd = SparseDiffusion(load_model("sd", GRID, footprint=fp), SparseConfig(num_candidates=4),
+    # the free-first-leg rule acts on the followed leg only, so it is off in both runs here
+    sd = SparseDiffusion(load_model("sd", GRID, footprint=fp),
+                         SparseConfig(num_candidates=4, leg_batches=-1),
                          placer=WaypointPlacer(GRID, fp, reach=1.0))
     hd = HierarchicalPlanner(sd, load_model("dd", GRID, footprint=fp),
                              costmap=cc.make_costmap(GRID), footprint_points=fp.points,
@@ -402,6 +404,93 @@ def test_every_waypoint_repairs_only_the_followed_leg_and_plans_the_same():
     sd.plan = spy
     one = hd.plan(start, goal, generator=torch.Generator().manual_seed(0))
     assert set(asked) == {1}
+    assert one.first_leg == [""] * len(one.global_plans) and not one.first_leg_changed
     sd.plan = lambda *args, repair_legs=None, **kwargs: plain(*args, **kwargs)
     every = hd.plan(start, goal, generator=torch.Generator().manual_seed(0))
     np.testing.assert_array_equal(one.trajectory, every.trajectory)
+
+
+# maze2d-large's corner: (1.5, 1.5) and (1.5, 3.5) lie in free bands 1 m apart with a wall between
+# (x 0-2, y 2-3); the way round is the 1 m gap at x 2-3
+S_, G_ = np.array([1.5, 1.5]), np.array([1.5, 3.5])
+THROUGH = np.array([S_, [1.5, 2.5], G_])  # the shortest: its first leg ends in the wall
+ROUND = np.array([S_, [2.5, 1.5], G_])  # longer; its first leg is free
+
+
+def scripted_sd(batches, *, leg_batches=3, num_candidates=4):
+    """A SparseDiffusion whose sampler returns ``batches[horizon]`` (N, horizon, 2) [m] and
+    records the horizons asked; placement only (a 0.1 m reach, no leg repair), so the test's
+    candidates keep their legs."""
+    from types import SimpleNamespace
+
+    from ecahd_core.placement import WaypointPlacer
+
+    fp = make_footprint("circle")
+    sd = SparseDiffusion(load_model("sd", GRID, footprint=fp),
+                         SparseConfig(num_candidates=num_candidates, leg_batches=leg_batches),
+                         placer=WaypointPlacer(GRID, fp, reach=0.1, leg_rounds=0))
+    asked = []
+
+    def sample(*, batch, horizon, **kwargs):
+        asked.append(horizon)
+        return SimpleNamespace(trajectories=torch.as_tensor(batches[horizon], dtype=torch.float32))
+
+    sd.sampler.sample = sample
+    return sd, asked
+
+
+def test_rank_candidates_starts_with_the_rules_choice_and_lists_every_candidate():
+    from ecahd_core.planner import rank_candidates, select_best
+
+    rng = np.random.default_rng(0)
+    cands = rng.uniform(0, 10, (6, 4, 2))
+    cands[:, -1] = [9.0, 9.0]
+    col = rng.uniform(0, 1, 6)
+    for rule, costs in (("shortest_reaching", None), ("collision_aware", col)):
+        order = rank_candidates(cands, np.array([9.0, 9.0]), rule=rule, collision_costs=costs)
+        assert sorted(order) == list(range(6))
+        assert order[0] == select_best(cands, np.array([9.0, 9.0]), rule=rule,
+                                       collision_costs=costs)
+    order = rank_candidates(cands, np.array([9.0, 9.0]), rule="collision_aware",
+                            collision_costs=col)
+    assert list(col[order[1:]]) == sorted(col[order[1:]])
+
+
+def test_a_first_leg_through_a_wall_gives_way_to_a_candidate_whose_first_leg_is_free():
+    sd, asked = scripted_sd({3: np.stack([THROUGH, ROUND, THROUGH, THROUGH])})
+    assert sd.placer.leg_walls(THROUGH)[0] > 0 and sd.placer.leg_walls(ROUND)[0] == 0
+    plan = sd.plan(S_, G_, horizon=3, repair_legs=1)
+    assert plan.first_leg == "other" and plan.best == 1 and asked == [3]
+    np.testing.assert_allclose(plan.waypoints, ROUND, atol=1e-6)
+    # the paper's choice where the caller follows every leg, or with the rule off
+    for legs, batches in ((None, 3), (1, -1)):
+        sd, asked = scripted_sd({3: np.stack([THROUGH, ROUND, THROUGH, THROUGH])},
+                                leg_batches=batches)
+        plan = sd.plan(S_, G_, horizon=3, repair_legs=legs)
+        assert plan.first_leg == "" and plan.best == 0 and asked == [3]
+        np.testing.assert_allclose(plan.waypoints, THROUGH, atol=1e-6)
+
+
+def test_with_no_free_first_leg_further_batches_get_one_waypoint_more_each():
+    through = {h: np.repeat(np.linspace(S_, G_, h)[None], 4, axis=0) for h in range(2, 12)}
+    sd, asked = scripted_sd(through, leg_batches=3)
+    plan = sd.plan(S_, G_, horizon=3, repair_legs=1)
+    assert asked == [3, 4, 5, 6] and plan.first_leg == "none"
+    np.testing.assert_allclose(plan.waypoints, THROUGH, atol=1e-6)  # the selected one stays
+    # found in the second further batch: its candidates and index come with the plan
+    found = dict(through)
+    found[5] = found[5].copy()
+    found[5][2] = np.array([S_, [2.5, 1.5], [2.5, 2.5], [2.5, 3.5], G_])
+    sd, asked = scripted_sd(found, leg_batches=3)
+    plan = sd.plan(S_, G_, horizon=3, repair_legs=1)
+    assert asked == [3, 4, 5] and plan.first_leg == "batch" and plan.best == 2
+    assert plan.candidates.shape == (4, 5, 2)
+    np.testing.assert_allclose(plan.waypoints, found[5][2], atol=1e-6)
+    # a straight last leg (horizon 2) into the next room gets a waypoint to place; never more
+    # waypoints than the model learnt
+    top = sd.sampler.model.config.max_horizon
+    sd, asked = scripted_sd(through, leg_batches=top + 2)
+    assert sd.plan(S_, G_, horizon=2, repair_legs=1).first_leg == "none"
+    assert asked[:2] == [3, 4] and max(asked) == top and len(asked) == top + 2
+    with pytest.raises(EcahdError, match="leg_batches"):
+        SparseConfig(leg_batches=-2)

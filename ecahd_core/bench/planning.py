@@ -36,6 +36,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ecahd_core.errors import EcahdError
+from ecahd_core.placement import LEG_BATCHES
 
 log = logging.getLogger(__name__)
 
@@ -93,6 +94,7 @@ class PlanningBenchSettings:
     warm_fraction: float = 0.0  # SparseConfig.warm_fraction: HD's warm-started re-plans (0: off)
     replan_spacing: float | None = None  # [m] HierarchicalPlanner's (None: by the map; 0: off)
     precision: str = "fp32"  # the SD Transformer's inference precision (SparseConfig.precision)
+    leg_batches: int = LEG_BATCHES  # SparseConfig.leg_batches: a free first leg (-1: off)
     ablation: bool = True
     guidance: str = "both"  # diffusion methods with and without guidance, or "on" / "off" only
     safety_net: bool = True  # ours: judge HD / ECAHD with and without the net (ecahd_core.safety)
@@ -121,6 +123,7 @@ class CellResult:
     problems: int
     variant: str = ""  # Table II: cost mode (+ dilation)
     exact_rule_rate: float | None = None  # HD: % of plans where the exact rule acted
+    first_leg_rate: float | None = None  # HD: % of plans where SD's free-first-leg rule acted
     # the same paths through the safety net (HD cells when settings.safety_net; None otherwise)
     net_collision_free: float | None = None  # % after the net
     net_success_free: float | None = None
@@ -227,7 +230,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                 guidance_weight=settings.guidance_weight,
                 guidance_space=settings.guidance_space,
                 warm_fraction=settings.warm_fraction, max_spacing=settings.max_spacing,
-                precision=settings.precision),
+                precision=settings.precision, leg_batches=settings.leg_batches),
                 cost=cost, placer=placer_for(grid, fp, settings.place_reach))
             if method == "sd":
                 plan_fn = lambda s, g: (sd.plan(s, g, generator=gen).waypoints, None)  # noqa: E731
@@ -261,7 +264,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                         retries=settings.net_retries, resamples=settings.net_resamples),
                                     planner=hd, astar=astar_for(robot, fp))
                     net_gen = torch.Generator().manual_seed(settings.sample_seed + 1)
-        paths, times, dd, kept = [], [], [], []
+        paths, times, dd, kept, switched = [], [], [], [], []
         net_paths, net_times, net_rules = [], [], []
         label = f"{METHOD_LABELS[method]}{' guided' if guidance else ''} {robot} {variant}".strip()
         for prob in tqdm(problems, desc=label, disable=not progress, leave=False):
@@ -272,6 +275,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
             if dd_segs is not None:
                 dd.extend(dd_segs)
                 kept.append(any(last[0].exact_kept))
+                switched.append(last[0].first_leg_changed)
             if net is not None:  # the same path through the net, timed on its own
                 safe = net.apply(paths[-1], segments=last[0].segments, generator=net_gen)
                 net_paths.append(safe.path)
@@ -281,6 +285,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                       robot=robot, variant=variant)
         if kept:
             cell.exact_rule_rate = 100 * float(np.mean(kept))
+            cell.first_leg_rate = 100 * float(np.mean(switched))
         if net is not None:
             after = _judge(net_paths, net_times, dd, problems, fp, grid, method=method,
                            guidance=guidance, robot=robot)
@@ -322,6 +327,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                "guidance_space": settings.guidance_space, "margin": margin,
                "dd_retries": settings.dd_retries, "polish_steps": settings.polish_steps,
                "keep_better": settings.keep_better, "exact_rule": settings.exact_rule,
+               "leg_batches": settings.leg_batches,
                "replan": settings.replan, "warm_fraction": settings.warm_fraction,
                # one number when every robot's model asked for the same, else per robot
                "replan_spacing": (next(iter(spacings.values()))
@@ -375,6 +381,10 @@ def format_markdown(r: PlanningBenchResult) -> str:
                 if c.get("max_spacing") else "")
              + (f", SD's waypoints in walls placed in free space within {c['place_reach']:g} m "
                 "and legs crossing walls repaired" if c.get("place_reach") else "")
+             + (f", a re-plan whose first leg still crosses a wall takes another candidate "
+                f"(up to {c['leg_batches']} more batches)"
+                if c.get("place_reach") and c.get("leg_batches", -1) >= 0
+                and c["replan"] == "every_waypoint" else "")
              + ", "
              f"torch {c['torch']} with {c['threads']} thread(s). Each cell: ours / paper"
              + ("." if c["map"] == "maze2d-large" else
@@ -419,11 +429,14 @@ def format_markdown(r: PlanningBenchResult) -> str:
                   "plans where "
                   "that rule acted last. Exact rule: share of plans where the planner itself put "
                   "back a straight or unpolished local plan the exact checker finds free "
-                  "(HierarchicalPlanner's exact_check; counted in ECAHD alone).", "",
+                  "(HierarchicalPlanner's exact_check; counted in ECAHD alone). First leg: share "
+                  "of plans where a re-plan took another SD candidate, or one of a further "
+                  "batch, because the selected one's first leg crossed a wall "
+                  "(SparseConfig.leg_batches; counted in ECAHD alone).", "",
                   "| method | guidance | robot | collision-free % | success & free % | exact rule % "
-                  "| retry % | resample % | fallback % | unsafe % | time mean ms | "
+                  "| first leg % | retry % | resample % | fallback % | unsafe % | time mean ms | "
                   "time median ms | time p95 ms |",
-                  "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+                  "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for x in netted:
             lines.append(
                 f"| {METHOD_LABELS[x.method]}{' (ECAHD)' if x.guidance else ''} | "
@@ -431,6 +444,7 @@ def format_markdown(r: PlanningBenchResult) -> str:
                 f"{x.collision_free:.1f} → {x.net_collision_free:.1f} | "
                 f"{x.success_free:.1f} → {x.net_success_free:.1f} | "
                 f"{'–' if x.exact_rule_rate is None else f'{x.exact_rule_rate:.1f}'} | "
+                f"{'–' if x.first_leg_rate is None else f'{x.first_leg_rate:.1f}'} | "
                 f"{x.net_retry_rate:.1f} | "
                 f"{'–' if x.net_resample_rate is None else f'{x.net_resample_rate:.1f}'} | "
                 f"{x.net_fallback_rate:.1f} | {x.net_unsafe_rate:.1f} | "

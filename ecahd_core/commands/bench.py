@@ -221,6 +221,11 @@ def _add_planning_arguments(parser: argparse.ArgumentParser) -> None:
                         help="[m] SD's waypoints in a wall move into free space within R, legs "
                              "crossing a wall get a placed midpoint (ours; 0: off; default: "
                              "on at 1 m for maps over 50 000 cells, off on smaller ones)")
+    parser.add_argument("--leg-batches", type=int, default=d.leg_batches, metavar="K",
+                        help="HD, every_waypoint, with placement on: a re-plan whose first leg "
+                             "still crosses a wall after leg repair takes another SD candidate "
+                             "whose first leg does not, else one of up to K more batches (one "
+                             "waypoint more each; ours; 0: the other candidates only; -1: off)")
     parser.add_argument("--guidance", choices=tuple(GUIDANCE_RUNS), default=d.guidance,
                         help="run the diffusion methods with and without J's guidance, or only "
                              "one of the two (on: ECAHD's own setting)")
@@ -245,7 +250,7 @@ def _run_planning(args: argparse.Namespace) -> int:
         replan=args.replan, warm_fraction=args.warm_fraction, max_spacing=args.max_spacing,
         place_reach=args.place_reach, ablation=not args.no_ablation, precision=args.precision,
         net_resamples=args.net_resamples, replan_spacing=args.replan_spacing,
-        guidance=args.guidance)
+        guidance=args.guidance, leg_batches=args.leg_batches)
     result = run_planning_benchmark(settings, progress=not args.no_progress)
     md = format_markdown(result)
     print(md)
