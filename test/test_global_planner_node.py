@@ -208,6 +208,36 @@ def test_warm_fraction_starts_a_waypoint_replan_from_the_rest_of_the_plan(rig):
     assert len(path_to_xy(r.plans[-1])) == 9 and tuple(path_to_xy(r.plans[-1])[-1]) == GOAL
 
 
+@pytest.mark.parametrize("place_reach, replan, want", [(1.0, "every_waypoint", True),
+                                                       (0.0, "every_waypoint", False),
+                                                       (1.0, "once", False)])
+def test_the_free_first_leg_rule_acts_where_the_robot_follows_only_the_first_leg(
+        rig, place_reach, replan, want):
+    """With placement on and re-plans at each waypoint, SD judges candidates' first legs with
+    the node's placer (map + remembered obstacles; SparseConfig.leg_batches); the published plan
+    still gets the placer over all its legs."""
+    r = rig(num_candidates=4, place_reach=place_reach, replan=replan)
+    ready(r)
+    seen = []
+    original = r.planner.sparse.plan
+
+    def spy(*a, **k):
+        seen.append((k.get("repair_legs"), r.planner.sparse.placer))
+        return original(*a, **k)
+
+    r.planner.sparse.plan = spy
+    r.send_goal(GOAL)
+    r.spin_until(lambda: r.plans)
+    legs, placer = seen[-1]
+    assert (legs == 1) == want and (placer is not None) == want
+    if want:
+        assert placer is r.planner._placer()
+    assert r.planner.sparse.placer is None  # only for the call
+    from ecahd_core.placement import LEG_BATCHES
+
+    assert r.planner.sparse.config.leg_batches == LEG_BATCHES  # the parameter's default
+
+
 def test_same_seed_reproduces_the_plan(rig):
     paths = []
     for _ in range(2):
