@@ -75,8 +75,9 @@ class SparseConfig:
             other candidates are tried in the rule's order and the first whose first leg is
             free is taken; if none is, up to ``leg_batches`` more batches of N are drawn, each
             with one waypoint more than the last up to the model's longest horizon (a straight
-            last leg into the next room becomes a plan with a waypoint to place in the door). 0: only the first batch's
-            other candidates; -1: off (the selected candidate, as the paper).
+            last leg into the next room becomes a plan with a waypoint to place in the door).
+            0: only the first batch's other candidates; -1: off (the selected candidate, as the
+            paper).
     """
 
     num_candidates: int = 10
@@ -325,7 +326,8 @@ class SparseDiffusion:
         cfg = self.config
         goal_np = goal.detach().cpu().numpy().astype(np.float64)
         tried = {best}
-        for extra in range(cfg.leg_batches + 1):
+        # a horizon-2 batch is N copies of the straight leg, already tried
+        for extra in range(1 if horizon <= 2 else 0, cfg.leg_batches + 1):
             if extra:
                 horizon = min(horizon + 1, self.sampler.model.config.max_horizon)
                 cands_t = self.sampler.sample(batch=cfg.num_candidates, horizon=horizon,
