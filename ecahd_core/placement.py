@@ -224,16 +224,6 @@ class WaypointPlacer:
                 return path[1:3]
         return None
 
-    def first_leg_free(self, xy: np.ndarray) -> bool:
-        """Whether the first leg of ``xy`` (P >= 2, 2) [m] is free: :meth:`wall_length` 0 and
-        the exact checker finds the footprint free along it (facing along the leg)."""
-        from ecahd_core.collision import check_collision
-
-        leg = np.asarray(xy, dtype=np.float64).reshape(-1, 2)[:2]
-        if self.wall_length(leg[0], leg[1:])[0] > 0:
-            return False
-        return check_collision(leg, self.footprint, self.grid).collision_free
-
     def leg_walls(self, xy: np.ndarray) -> np.ndarray:
         """(P, 2) [m] -> (P - 1,) :meth:`wall_length` of each straight leg."""
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)

@@ -70,8 +70,7 @@ class SparseConfig:
         leg_batches: a free first leg (ours, beyond the paper; needs the ``placer``, and acts on
             re-plans whose caller follows only the first leg, ``repair_legs`` 1, as Algorithm
             1's every_waypoint loop does). When the selected candidate's first leg, after
-            placement and leg repair, still collides (``WaypointPlacer.first_leg_free``: the
-            footprint's inscribed circle or the exact checker along the straight leg), the
+            placement and leg repair, still passes nearer a wall than the footprint fits, the
             other candidates are tried in the rule's order and the first whose first leg is
             free is taken; if none is, up to ``leg_batches`` more batches of N are drawn, each
             with one waypoint more than the last up to the model's longest horizon (a straight
@@ -310,10 +309,9 @@ class SparseDiffusion:
         return self.placer(waypoints, legs=legs)
 
     def _leg_blocked(self, waypoints: np.ndarray) -> bool:
-        """Whether the first leg of ``waypoints`` (P, 2) [m] collides: it passes nearer a wall
-        than the footprint's inscribed circle fits, or the exact checker finds the footprint
-        in collision along it (the placer's ``first_leg_free``)."""
-        return not self.placer.first_leg_free(waypoints)
+        """Whether the first leg of ``waypoints`` (P, 2) [m] passes nearer a wall than the
+        footprint fits (the placer's ``wall_length`` > 0)."""
+        return bool(self.placer.leg_walls(waypoints[:2])[0] > 0)
 
     def _free_first_leg(self, cands: np.ndarray, col: np.ndarray | None, best: int,
                         start: torch.Tensor, goal: torch.Tensor, horizon: int,

@@ -195,16 +195,3 @@ def test_wall_length_samples_each_leg_and_counts_off_map_as_wall():
     np.testing.assert_array_equal(placer.wall_length(a[7], b[7:8]), got[7:8])
     off = np.array([[lo[0] - 0.5, lo[1]]])  # a leg wholly off the map is wall all along
     assert placer.wall_length(off[0], off + [1.0, 0.0])[0] == pytest.approx(1.0)
-
-
-def test_first_leg_free_asks_the_exact_checker_where_the_inscribed_circle_clears():
-    """A quadruped (0.65 x 0.3 m) driving at the block's side: its inscribed circle clears the
-    wall (wall_length 0) but its nose reaches in, so the leg is not free; short of that, it is."""
-    grid = block_map()
-    quad = WaypointPlacer(grid, make_footprint("quadruped"))
-    nose_in = np.array([[3.0, 0.5], [3.0, 1.25]])  # 0.25 m short of the block, facing it
-    assert quad.leg_walls(nose_in)[0] == 0 and not quad.first_leg_free(nose_in)
-    assert quad.first_leg_free(np.array([[3.0, 0.5], [3.0, 1.0], [3.0, 3.0]]))
-    assert not quad.first_leg_free(np.array([[3.0, 0.5], [3.0, 3.5]]))  # through the block
-    circle = WaypointPlacer(grid, make_footprint("circle"))
-    assert not circle.first_leg_free(nose_in)  # 0.4 m radius: its circle reaches the block
