@@ -386,11 +386,19 @@ def test_ddp_on_two_cpu_processes_writes_one_checkpoint(tmp_path):
     script.write_text(DDP_SCRIPT)
     np.savez(tmp_path / "data.npz", **{f"h{h}": a for h, a in toy_arrays(n=32).items()})
     out = tmp_path / "ddp.pt"
-    cmd = [sys.executable, "-m", "torch.distributed.run", "--nnodes", "1", "--nproc_per_node",
-           "2", "--master_addr", "127.0.0.1", "--master_port", str(_free_port()),
-           str(script), str(tmp_path / "data.npz"), str(out), str(tmp_path / "report")]
     env = dict(os.environ, OMP_NUM_THREADS="1")
-    proc = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=180)
+    for attempt in range(2):
+        cmd = [sys.executable, "-m", "torch.distributed.run", "--nnodes", "1",
+               "--nproc_per_node", "2", "--master_addr", "127.0.0.1", "--master_port",
+               str(_free_port()), str(script), str(tmp_path / "data.npz"), str(out),
+               str(tmp_path / "report")]
+        proc = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True,
+                              timeout=180)
+        # gloo on 2 cores now and then aborts a rank at exit (std::terminate, SIGABRT; once
+        # in six CI runs on 2026-12-03): one more run then, any other failure fails at once
+        if proc.returncode == 0 or "terminate called without an active exception" not in (
+                proc.stdout + proc.stderr):
+            break
     assert proc.returncode == 0, proc.stdout + proc.stderr
     lines = [(tmp_path / f"report{rank}").read_text() for rank in (0, 1)]
     assert [line.split()[:3] for line in lines] == [["rank=0", "wrote=True", "step=6"],
