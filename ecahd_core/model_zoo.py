@@ -15,6 +15,7 @@ Kinds (paper Sec. III-B, IV-A):
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -49,6 +50,8 @@ class ModelRecipe:
         ema_decay: EMA of the sampling weights.
         sample_steps: DDIM steps used when sampling (recorded in the checkpoint; K = 100
             training steps).
+        fourier_period: [m] the finest period of the waypoint embedding's Fourier features on
+            a building's map (:func:`fourier_bands`; None: none, the paper's embedding).
         batch_horizon: the trajectory length ``batch_size`` was sized for (None: any). A model
             trained on longer trajectories gets a proportionally smaller batch, so a step
             costs about the same (a DD of more than 4 points, ``ecahd dataset --dense-points
@@ -69,6 +72,7 @@ class ModelRecipe:
     ema_decay: float = 0.999
     sample_steps: int = 10
     batch_horizon: int | None = None
+    fourier_period: float | None = None
 
     def batch_for(self, max_horizon: int) -> int:
         """The batch size for trajectories of up to ``max_horizon`` points: ``batch_size``, or
@@ -78,16 +82,33 @@ class ModelRecipe:
             return self.batch_size
         return max(32, round(self.batch_size * (self.batch_horizon + 1) / (max_horizon + 1)))
 
-    def denoiser_config(self, max_horizon: int):
+    def denoiser_config(self, max_horizon: int, grid=None):
         """The :class:`~ecahd_core.diffusion.DenoiserConfig` for trajectories of up to
-        ``max_horizon`` points."""
+        ``max_horizon`` points on ``grid`` (None: no Fourier features)."""
         from ecahd_core.diffusion import DenoiserConfig
 
         sizes = ("d_model", "n_layers", "n_heads") if self.architecture == "transformer" \
             else ("unet_channels", "unet_kernel_size")
         given = {name: getattr(self, name) for name in sizes if getattr(self, name) is not None}
+        if grid is not None and self.fourier_period is not None:
+            given["fourier_bands"] = fourier_bands(grid, self.fourier_period)
         return DenoiserConfig(max_horizon=max_horizon, architecture=self.architecture,
                               prediction=self.prediction, **given)
+
+
+def fourier_bands(grid, period: float) -> int:
+    """F, the Fourier bands of a waypoint embedding on ``grid`` whose finest period is at least
+    ``period`` [m]: the map-bounds normaliser sends a half-extent s [m] to 1, so band k has a
+    period of 2 s / 2^k m and F = floor(log2(2 s / period)) + 1 (one band per octave from the
+    map's size down). 0 on maps of at most ``astar.COARSE_ABOVE_CELLS`` cells (maze2d-large:
+    the paper's embedding, and its tables' models)."""
+    from ecahd_core.astar import COARSE_ABOVE_CELLS
+
+    if grid.width * grid.height <= COARSE_ABOVE_CELLS:
+        return 0
+    x0, y0, x1, y1 = grid.bounds
+    half = 0.5 * max(x1 - x0, y1 - y0)
+    return max(0, int(math.floor(math.log2(2.0 * half / period))) + 1)
 
 
 # Sized so that all three train on a 2-core CPU in about 25 minutes (docs/RESULTS.md) and
@@ -98,9 +119,11 @@ class ModelRecipe:
 # 4.4 x the A* length with lr 1e-3, 19.3 x with 1e-4 and 5.9 x with 3e-3 (circle); at 3000 steps
 # x_0 prediction left 11% of the path in collision (1.2 x A*) against 29% (2.3 x) for eps
 # (quadruped).
+# [m] the finest period of SD's Fourier features on a building's map (ModelRecipe.fourier_period)
+FOURIER_PERIOD = 0.5
 RECIPES: dict[str, ModelRecipe] = {
     "sd": ModelRecipe(d_model=128, n_layers=4, n_heads=4, steps=12000, batch_size=256,
-                      warmup_steps=500),
+                      warmup_steps=500, fourier_period=FOURIER_PERIOD),
     "dd": ModelRecipe(d_model=96, n_layers=2, n_heads=4, steps=4000, batch_size=256,
                       warmup_steps=300, batch_horizon=DEFAULT_DENSE_POINTS),
     "fd": ModelRecipe(architecture="temporal_unet", unet_channels=(32, 64, 128),

@@ -1,5 +1,6 @@
 """Training and checkpoints: a toy model learns straight lines, checkpoints round-trip and refuse
 the wrong map, resuming is exact, and DDP runs on two CPU processes."""
+import math
 import os
 import socket
 import subprocess
@@ -148,6 +149,49 @@ def test_temporal_unet_checkpoint_round_trip(tmp_path, prediction):
     ref = sample(result.ema_model, DDIMScheduler(), NORMALIZER,
                  generator=torch.Generator().manual_seed(3), **kw)
     got = sample(model, ckpt.build_scheduler(), ckpt.normalizer,
+                 generator=torch.Generator().manual_seed(3), **kw)
+    assert torch.equal(ref.trajectories, got.trajectories)
+
+
+def test_fourier_features_are_the_points_then_sin_and_cos_of_each_band():
+    model = build_denoiser(DenoiserConfig(max_horizon=6, d_model=16, n_layers=1, n_heads=2,
+                                          ff_mult=2, fourier_bands=3))
+    assert model.point_embed.in_features == 2 + 4 * 3
+    x = torch.tensor([[[0.25, -0.5], [1.0, 0.0]]])
+    feats = model.point_features(x)  # (1, 2, 14)
+    ang = torch.tensor([[0.25 * math.pi * f for f in (1, 2, 4)] + [-0.5 * math.pi * f for f in (1, 2, 4)],
+                        [1.0 * math.pi * f for f in (1, 2, 4)] + [0.0] * 3])
+    torch.testing.assert_close(feats[0], torch.cat([x[0], ang.sin(), ang.cos()], dim=-1))
+    # without bands the embedding is the paper's Linear(2 -> d_model) of the point itself
+    plain = build_denoiser(tiny_config())
+    assert plain.point_embed.in_features == 2 and plain.point_features(x) is x
+
+
+@pytest.mark.parametrize("bad", [-1, 17, 1.5, True])
+def test_fourier_bands_are_checked(bad):
+    with pytest.raises(ValueError, match="fourier_bands"):
+        DenoiserConfig(max_horizon=6, fourier_bands=bad)
+    with pytest.raises(ValueError, match="fourier_bands"):
+        DenoiserConfig(max_horizon=6, architecture="temporal_unet", fourier_bands=2)
+
+
+def test_fourier_checkpoint_round_trip_gives_identical_samples(tmp_path):
+    cfg = DenoiserConfig(max_horizon=6, d_model=16, n_layers=1, n_heads=2, ff_mult=2,
+                         fourier_bands=4)
+    result = train(cfg, toy_arrays(n=32), NORMALIZER,
+                   TrainConfig(steps=4, batch_size=8, warmup_steps=1, log_every=2, seed=0),
+                   kind="sd", out_path=tmp_path / "sd.pt", meta=META, progress=False)
+    raw = torch.load(result.path, weights_only=True)
+    assert raw["model_config"]["fourier_bands"] == 4
+    light = load_checkpoint(result.path).save(tmp_path / "sd_infer.pt",
+                                              include_training_state=False)
+    ckpt = load_checkpoint(light)
+    assert ckpt.model_config == cfg
+    start, goal = toy_problems(4)
+    kw = dict(batch=4, horizon=6, conditions={0: start, -1: goal}, num_steps=5, eta=1.0)
+    ref = sample(result.ema_model, DDIMScheduler(), NORMALIZER,
+                 generator=torch.Generator().manual_seed(3), **kw)
+    got = sample(ckpt.build_model(), ckpt.build_scheduler(), ckpt.normalizer,
                  generator=torch.Generator().manual_seed(3), **kw)
     assert torch.equal(ref.trajectories, got.trajectories)
 

@@ -207,3 +207,19 @@ def test_dd_batch_keeps_the_tokens_per_step_for_longer_local_plans():
     assert dd.batch_for(15) == round(256 * 5 / 16) == 80
     assert dd.batch_for(1000) == 32
     assert sd.batch_for(10) == sd.batch_size  # SD's batch is not scaled
+
+
+def test_sd_gets_fourier_bands_down_to_half_a_metre_on_a_building_map_only():
+    from ecahd_core.maps import GridMap
+    from ecahd_core.model_zoo import FOURIER_PERIOD, fourier_bands, recipe
+
+    office = GridMap(data=np.zeros((1200, 1000), dtype=np.int8), resolution=0.05)  # 50 x 60 m
+    bands = fourier_bands(office, FOURIER_PERIOD)
+    finest = 2 * 30.0 / 2 ** (bands - 1)  # [m] the period of the last band (half-extent 30 m)
+    assert bands == 7 and FOURIER_PERIOD <= finest < 2 * FOURIER_PERIOD
+    assert recipe("sd").denoiser_config(10, office).fourier_bands == bands
+    assert recipe("dd").denoiser_config(4, office).fourier_bands == 0
+    assert recipe("sd").denoiser_config(10).fourier_bands == 0
+    # maze2d-large keeps the paper's embedding (and its tables' models)
+    assert fourier_bands(builtin_map("maze2d-large"), FOURIER_PERIOD) == 0
+    assert recipe("sd").denoiser_config(10, builtin_map("maze2d-large")).fourier_bands == 0

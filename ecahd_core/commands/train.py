@@ -93,7 +93,7 @@ def train_one(kind: str, dataset, *, out: Path, seed: int, device: str, steps: i
     warmup = warmup if warmup is not None else int(round(r.warmup_steps * min(1.0, steps_scale)))
     if time_limit_s is not None:
         steps = int(steps * STEP_CAP)
-    config = r.denoiser_config(max(arrays))
+    config = r.denoiser_config(max(arrays), dataset.grid())
     tc = TrainConfig(steps=steps, batch_size=batch_size or r.batch_for(max(arrays)),
                      warmup_steps=warmup,
                      lr=r.lr, ema_decay=r.ema_decay, seed=seed, device=device,
@@ -136,7 +136,7 @@ def seconds_per_step(kind: str, grid, *, device: str = "cpu", probe: int = 8,
     rng = np.random.default_rng(0)
     arrays = {h: rng.uniform(lo, hi, size=(r.batch_size, h, 2)).astype(np.float32)
               for h in ESTIMATE_HORIZONS[kind]}
-    config = r.denoiser_config(max(arrays))
+    config = r.denoiser_config(max(arrays), grid)
     normalizer = Normalizer.from_bounds(*grid.bounds)
     times = []
     quiet = logging.getLogger("ecahd_core.diffusion.training")

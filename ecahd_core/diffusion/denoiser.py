@@ -10,8 +10,9 @@ Transformer tokens (B, 1 [+1] + P, d_model):
                 ``TransformerForDiffusion`` also feeds time as a token).
     [map]       optional (``use_map_encoder``): a small ResNet's pooled feature of a (B, 1, H, W)
                 occupancy image (the paper's "shallow CNN (ResNet-18)", scaled down).
-    [waypoints] Linear(2 -> d_model) of each normalised point + a learned position embedding
-                (rows 0..max_horizon-1).
+    [waypoints] Linear(2 [+ 4 F] -> d_model) of each normalised point (with ``fourier_bands``
+                F > 0: and its Fourier features, sin and cos of pi 2^k z per coordinate,
+                k < F) + a learned position embedding (rows 0..max_horizon-1).
 Encoder: ``nn.TransformerEncoder`` (batch_first, pre-norm, GELU, no attention mask: every token
 sees every other), final LayerNorm, Linear(d_model -> 2) on the waypoint tokens.
 
@@ -87,6 +88,12 @@ class DenoiserConfig:
             "sample", the clean trajectory x_0 (Diffuser's maze2d setting,
             ``predict_epsilon=False``). Samplers always receive eps: a "sample" network is
             wrapped in :class:`EpsilonFromSample` (``Checkpoint.build_model`` does this).
+        fourier_bands: F (transformer; ours, beyond the paper): each waypoint's embedding also
+            sees sin(pi 2^k z) and cos(pi 2^k z) of its normalised coordinates z, k < F
+            (Tancik et al. 2020, "Fourier features let networks learn high frequency
+            functions"). A linear embedding of coordinates normalised by a 60 m map leaves
+            the network to build a door's 1 m from smooth functions of z; 0: the paper's
+            Linear(2 -> d_model).
     """
 
     max_horizon: int
@@ -100,6 +107,7 @@ class DenoiserConfig:
     unet_channels: tuple[int, ...] = (32, 64, 128)
     unet_kernel_size: int = 5
     prediction: str = "epsilon"
+    fourier_bands: int = 0
 
     def __post_init__(self) -> None:
         for name, allowed in (("architecture", ARCHITECTURES), ("prediction", PREDICTIONS)):
@@ -111,6 +119,14 @@ class DenoiserConfig:
                      "unet_kernel_size"):
             object.__setattr__(self, name, _positive_int(f"DenoiserConfig.{name}",
                                                          getattr(self, name)))
+        if isinstance(self.fourier_bands, bool) or int(self.fourier_bands) != self.fourier_bands \
+                or not 0 <= self.fourier_bands <= 16:
+            raise ValueError(f"DenoiserConfig.fourier_bands must be an integer in 0..16, "
+                             f"got {self.fourier_bands!r}")
+        object.__setattr__(self, "fourier_bands", int(self.fourier_bands))
+        if self.fourier_bands and self.architecture != "transformer":
+            raise ValueError("DenoiserConfig.fourier_bands is only supported by the "
+                             "'transformer' architecture")
         if self.max_horizon < 2:
             raise ValueError(f"DenoiserConfig.max_horizon must be >= 2, got {self.max_horizon}")
         if self.d_model % self.n_heads:
@@ -226,7 +242,10 @@ class TransformerDenoiser(nn.Module):
                              f"got {config.architecture!r}")
         self.config = config
         d = config.d_model
-        self.point_embed = nn.Linear(2, d)
+        self.point_embed = nn.Linear(2 + 4 * config.fourier_bands, d)
+        # pi 2^k, k < F: the Fourier features' angular frequencies (a buffer: moves with .to())
+        self.register_buffer("fourier_freqs", math.pi * 2.0 ** torch.arange(
+            config.fourier_bands, dtype=torch.float32), persistent=False)
         self.pos_embed = nn.Parameter(torch.zeros(1, config.max_horizon, d))
         self.horizon_embed = nn.Embedding(config.max_horizon + 1, d)
         self.time_mlp = nn.Sequential(nn.Linear(d, d * 2), nn.GELU(), nn.Linear(d * 2, d))
@@ -265,7 +284,7 @@ class TransformerDenoiser(nn.Module):
         """
         t = _check_inputs(x, t, self.config.max_horizon)
         B, P, _ = x.shape
-        tokens = self.point_embed(x) + self.pos_embed[:, :P]  # (B, P, d)
+        tokens = self.point_embed(self.point_features(x)) + self.pos_embed[:, :P]  # (B, P, d)
         horizon = torch.full((B,), P, dtype=torch.long, device=x.device)
         cond = self.time_mlp(sinusoidal_embedding(t, self.config.d_model)) \
             + self.horizon_embed(horizon)  # (B, d)
@@ -282,6 +301,14 @@ class TransformerDenoiser(nn.Module):
         h = torch.cat(prefix + [tokens], dim=1)  # (B, prefix + P, d)
         h = self._encode(h)
         return self.head(h[:, -P:])  # (B, P, 2)
+
+    def point_features(self, x: Tensor) -> Tensor:
+        """(B, P, 2) normalised points -> (B, P, 2 + 4 F): the points, then sin and cos of
+        each coordinate times each of the F frequencies (``fourier_bands``; F = 0: x itself)."""
+        if not self.config.fourier_bands:
+            return x
+        ang = x[..., None] * self.fourier_freqs.to(x.dtype)  # (B, P, 2, F)
+        return torch.cat([x, ang.sin().flatten(-2), ang.cos().flatten(-2)], dim=-1)
 
     def _encode(self, h: Tensor) -> Tensor:
         """``self.encoder(h)``, (B, T, d) -> (B, T, d). Without gradients in eval mode the
