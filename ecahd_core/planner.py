@@ -588,7 +588,7 @@ class LocalStages:
 
 
 # every_waypoint with SparseConfig.max_spacing or a replan spacing: iterations beyond P^g - 1
-# before the last one is made to go straight to the goal
+# before the last SD plan is followed to the goal whole (HierarchicalPlanner.plan)
 MAX_EXTRA_ITERATIONS = 30
 
 
@@ -890,8 +890,10 @@ class HierarchicalPlanner:
         # Algorithm 1 line 1: P^g - 1 iterations, the last one reaching G. With waypoint spacing
         # by distance (SparseConfig.max_spacing) a plan may have more waypoints than its
         # horizon, and with a replan spacing the horizon stays up while G is far: the
-        # iterations go on until a plan is just (S, G), at most MAX_EXTRA_ITERATIONS more,
-        # after which the last one goes straight to G.
+        # iterations go on until a plan is just (S, G), at most MAX_EXTRA_ITERATIONS more
+        # (a robot circling a door it cannot take), after which the last SD plan is followed to
+        # G whole: each of its legs is an iteration, all placed and repaired (ours; it was one
+        # straight leg to G, through every wall on the way).
         # MoveAgent takes the agent to the end of the local plan, t^g_p[1] (DD inpaints it), so
         # iteration p + 1's SD call needs only iteration p's SD plan: the SD calls run first,
         # then every iteration's local stage (lines 13-18) in one batch, as for replan "once":
@@ -902,16 +904,20 @@ class HierarchicalPlanner:
         while True:
             t0 = time.perf_counter()
             forced = p >= P_g - 2 + MAX_EXTRA_ITERATIONS
-            horizon = 2 if forced else replan_horizon(P_g, p, S.numpy(), G.numpy(),
-                                                      self.replan_spacing)
+            horizon = replan_horizon(P_g, p, S.numpy(), G.numpy(), self.replan_spacing)
             sparse = self.sparse.replan(S.numpy(), G.numpy(),
                                         global_plans[-1] if global_plans else None,
                                         horizon=horizon, generator=generator,
-                                        densify=not forced,
-                                        repair_legs=None if self.sparse.config.warm_fraction
+                                        repair_legs=None if forced
+                                        or self.sparse.config.warm_fraction
                                         else 1)  # lines 2-12; only t^g_p[0:2] is followed
             waypoints, placed = sparse.waypoints, placed + sparse.placed
             times["sd"] += (time.perf_counter() - t0) * 1e3
+            if forced:  # the whole plan to G, one iteration per leg
+                global_plans += [waypoints[q:] for q in range(len(waypoints) - 1)]
+                first_leg += [sparse.first_leg] + [""] * (len(waypoints) - 2)
+                p += len(waypoints) - 1
+                break
             global_plans.append(waypoints)
             first_leg.append(sparse.first_leg)
             S = torch.as_tensor(waypoints[1], dtype=torch.float32)  # MoveAgent

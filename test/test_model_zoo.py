@@ -223,3 +223,24 @@ def test_sd_gets_fourier_bands_down_to_half_a_metre_on_a_building_map_only():
     # maze2d-large keeps the paper's embedding (and its tables' models)
     assert fourier_bands(builtin_map("maze2d-large"), FOURIER_PERIOD) == 0
     assert recipe("sd").denoiser_config(10, builtin_map("maze2d-large")).fourier_bands == 0
+
+
+def test_train_gives_sd_fourier_features_on_a_building_map_and_none_with_period_0(tmp_path):
+    import torch
+
+    yaml_path, data = tmp_path / "depot.yaml", tmp_path / "depot.npz"
+    # 12 x 12 m at 0.05 m/cell: 57 600 cells, over the 50 000 of a building's map
+    assert main(["map", "generate", "--kind", "depot", "--size", "12", "12", "--resolution",
+                 "0.05", "--seed", "3", "--out", str(yaml_path)]) == 0
+    assert main(["dataset", "--map", str(yaml_path), "--pairs", "4", "--min-distance", "2",
+                 "--out", str(data), "--no-progress"]) == 0
+    tiny = ["--steps", "2", "--batch-size", "4", "--warmup", "1", "--no-progress"]
+    bands = {}
+    for period in (None, "0"):
+        out = tmp_path / f"sd_{period}.pt"
+        extra = [] if period is None else ["--fourier-period", period]
+        assert main(["train", "sd", "--data", str(data), "--out", str(out), *tiny, *extra]) == 0
+        bands[period] = torch.load(out, weights_only=True)["model_config"]["fourier_bands"]
+    assert bands == {None: 5, "0": 0}  # floor(log2(12 m / 0.5 m)) + 1 = 5
+    assert main(["train", "sd", "--data", str(data), "--out", str(tmp_path / "x.pt"), *tiny,
+                 "--fourier-period", "-1"]) == 2

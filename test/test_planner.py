@@ -56,6 +56,28 @@ def test_a_replan_spacing_keeps_waypoints_until_the_goal_is_near():
         make_planner(replan_spacing=-1.0)
 
 
+def test_out_of_iterations_the_last_sd_plan_is_followed_whole(monkeypatch):
+    # a replan spacing of 0.1 m keeps every re-plan at the full horizon; with no extra
+    # iterations allowed, iteration P^g - 2 is the last SD call, and its plan is followed to the
+    # goal leg by leg instead of one straight leg through the maze's walls
+    import ecahd_core.planner as planner_module
+
+    monkeypatch.setattr(planner_module, "MAX_EXTRA_ITERATIONS", 0)
+    start, goal = np.array([1.5, 1.5]), np.array([10.5, 7.5])
+    planner = make_planner(replan_spacing=0.1)
+    plan = planner.plan(start, goal, generator=torch.Generator().manual_seed(0))
+    P_g = planner.sparse.config.horizon
+    last = plan.global_plans[P_g - 2]
+    assert len(last) == P_g  # the full horizon still
+    assert len(plan.global_plans) == P_g - 2 + len(last) - 1 == len(plan.segments)
+    for q, wp in enumerate(plan.global_plans[P_g - 2:]):
+        np.testing.assert_array_equal(wp, last[q:])
+    assert len(plan.first_leg) == len(plan.global_plans)
+    np.testing.assert_allclose(plan.trajectory[-1], goal, atol=1e-5)
+    for a, b in zip(plan.segments, plan.segments[1:]):
+        assert np.allclose(a[-1], b[0])
+
+
 @pytest.mark.parametrize("c_th", [0.1, 1e9])
 def test_dd_runs_only_above_threshold(c_th):
     planner = make_planner(c_th=c_th)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import time
 from pathlib import Path
 
@@ -33,7 +34,28 @@ def _add_common(p: argparse.ArgumentParser) -> None:
                                       "weights); auto: bf16 where the device computes it "
                                       "natively (AVX512-BF16 / AMX CPUs, recent GPUs), fp32 "
                                       "elsewhere")
+    p.add_argument("--fourier-period", type=float, default=None, metavar="M",
+                   help="[m] the finest period of SD's Fourier features on a building's map "
+                        "(maps over 50 000 cells; default 0.5: 7 bands on a 60 m office); 0: "
+                        "none, the paper's linear embedding of the waypoints (maze2d-large "
+                        "never gets them)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _recipe(kind: str, fourier_period: float | None):
+    """``kind``'s ModelRecipe, with ``--fourier-period`` (None: the recipe's; 0: none) where
+    the recipe has Fourier features."""
+    from dataclasses import replace
+
+    from ecahd_core.model_zoo import recipe
+
+    r = recipe(kind)
+    if fourier_period is None or r.fourier_period is None:
+        return r
+    if not (math.isfinite(fourier_period) and fourier_period >= 0):
+        raise EcahdError(f"--fourier-period must be a finite number >= 0 m (0: none), "
+                         f"got {fourier_period}")
+    return replace(r, fourier_period=fourier_period or None)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -80,14 +102,15 @@ def train_one(kind: str, dataset, *, out: Path, seed: int, device: str, steps: i
               batch_size: int | None = None, warmup: int | None = None,
               steps_scale: float = 1.0, resume: str | None = None, ship: Path | None = None,
               progress: bool = True, precision: str = "fp32",
-              time_limit_s: float | None = None):
+              time_limit_s: float | None = None, fourier_period: float | None = None):
     """Train one model kind on an ExpertDataset; returns the TrainResult. With
     ``time_limit_s`` [s] training stops then, or at ``STEP_CAP`` x the scaled steps (the warm-up
-    stays the scaled run's)."""
+    stays the scaled run's). ``fourier_period``: [m] as ``--fourier-period`` (None: the
+    recipe's)."""
     from ecahd_core.diffusion import Normalizer, TrainConfig, train
-    from ecahd_core.model_zoo import model_meta, recipe, training_arrays
+    from ecahd_core.model_zoo import model_meta, training_arrays
 
-    r = recipe(kind)
+    r = _recipe(kind, fourier_period)
     arrays = training_arrays(kind, dataset)
     steps = steps or max(1, int(round(r.steps * steps_scale)))
     warmup = warmup if warmup is not None else int(round(r.warmup_steps * min(1.0, steps_scale)))
@@ -119,7 +142,7 @@ ESTIMATE_HORIZONS = {"sd": tuple(range(2, 11)), "dd": (4,), "fd": (100,)}
 
 
 def seconds_per_step(kind: str, grid, *, device: str = "cpu", probe: int = 8,
-                     precision: str = "fp32") -> float:
+                     precision: str = "fp32", fourier_period: float | None = None) -> float:
     """[s] one optimiser step of ``kind``'s recipe on this machine, measured on synthetic
     trajectories of the learnt horizons (a step's cost does not depend on the values): short
     runs of :func:`~ecahd_core.diffusion.train` (a warm-up, then 1 and 1 + ``probe`` steps; the
@@ -129,9 +152,8 @@ def seconds_per_step(kind: str, grid, *, device: str = "cpu", probe: int = 8,
     import numpy as np
 
     from ecahd_core.diffusion import Normalizer, TrainConfig, train
-    from ecahd_core.model_zoo import recipe
 
-    r = recipe(kind)
+    r = _recipe(kind, fourier_period)
     lo, hi = grid.bounds[:2], grid.bounds[2:]
     rng = np.random.default_rng(0)
     arrays = {h: rng.uniform(lo, hi, size=(r.batch_size, h, 2)).astype(np.float32)
@@ -163,6 +185,7 @@ def _set_threads(n: int | None) -> None:
 def run(args: argparse.Namespace) -> int:
     from ecahd_core.dataset import ExpertDataset
 
+    _recipe("sd", args.fourier_period)  # a bad --fourier-period fails before any work
     _set_threads(args.threads)
     precision = resolve_precision(args.precision, args.device)
     dataset = ExpertDataset.load(args.data)
@@ -171,7 +194,8 @@ def run(args: argparse.Namespace) -> int:
                        steps=args.steps, batch_size=args.batch_size, warmup=args.warmup,
                        steps_scale=args.steps_scale, resume=args.resume,
                        ship=Path(args.ship) if args.ship else None,
-                       progress=not args.no_progress, precision=precision)
+                       progress=not args.no_progress, precision=precision,
+                       fourier_period=args.fourier_period)
     last = result.loss_history[-1][1] if result.loss_history else float("nan")
     print(f"trained {args.kind}: {result.step} steps in {time.perf_counter() - t0:.0f} s, "
           f"final loss {last:.4f} -> {result.path}")
@@ -213,6 +237,7 @@ def run_all(args: argparse.Namespace) -> int:
     from ecahd_core.maps import load_map
     from ecahd_core.model_zoo import MODELS_DIR, MODELS_ENV, recipe, shipped_path
 
+    _recipe("sd", args.fourier_period)  # a bad --fourier-period fails before any work
     _set_threads(args.threads)
     precision = resolve_precision(args.precision, args.device)
     work = Path(args.work_dir)
@@ -224,7 +249,8 @@ def run_all(args: argparse.Namespace) -> int:
         raise EcahdError(f"--minutes must be > 0 and replaces --steps-scale, got --minutes "
                          f"{args.minutes} with --steps-scale {args.steps_scale}")
     # an ETA from the start: each model's step time measured now, the dataset has its own bar
-    per_step = {k: seconds_per_step(k, grid, device=args.device, precision=precision)
+    per_step = {k: seconds_per_step(k, grid, device=args.device, precision=precision,
+                                    fourier_period=args.fourier_period)
                 for k in args.kinds}
 
     def sized(scale: float) -> tuple[dict, dict]:
@@ -274,7 +300,7 @@ def run_all(args: argparse.Namespace) -> int:
         result = train_one(kind, dataset, out=work / f"{grid.name}_{kind}.pt", seed=args.seed,
                            device=args.device, steps_scale=scale, ship=ship,
                            precision=precision, time_limit_s=limit,
-                           progress=not args.no_progress)
+                           progress=not args.no_progress, fourier_period=args.fourier_period)
         times[kind] = time.perf_counter() - t0
         last = result.loss_history[-1][1] if result.loss_history else float("nan")
         todo.remove(kind)
