@@ -33,6 +33,9 @@ REPAIR_REACH = 3.0
 # more SD batches a re-plan may draw for a first leg that crosses no wall, one waypoint more each
 # (planner.SparseConfig.leg_batches; office 2, 32 development plans: ECAHD alone 56% -> 88%)
 LEG_BATCHES = 3
+# rounds in which planner.HierarchicalPlanner takes another SD candidate at a re-plan whose local
+# plan the exact checker still finds in collision (its ``backtracks``; 0: off)
+BACKTRACKS = 2
 REPAIR_CANDIDATES = 30  # lattice steps across a repair reach at most (a coarser step beyond)
 # candidates per side the two-bend repair pairs up (TWO_BEND_SAMPLES^2 legs judged at most)
 TWO_BEND_SAMPLES = 48

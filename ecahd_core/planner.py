@@ -19,12 +19,15 @@ import torch
 
 from ecahd_core.errors import EcahdError
 from ecahd_core.navigation import REPLAN_POLICIES, check_replan_spacing, replan_horizon
-from ecahd_core.placement import LEG_BATCHES
+from ecahd_core.placement import BACKTRACKS, LEG_BATCHES
 
 # of each batch's candidates whose first leg crosses a wall as sampled, how many SD's
 # free-first-leg rule (SparseConfig.leg_batches) sends through placement and repair (tens of ms
 # each): on office 2's 32 development plans 0 left 11 colliding, 2 left 4, 4 left 7
 LEG_REPAIRS = 2
+# iterations a backtracking round (HierarchicalPlanner's ``backtracks``) may try: each tries its
+# whole SD batch through placement, repair and one batch of local stages (hundreds of ms)
+BACKTRACK_TRIES = 4
 SELECTION_RULES = ("shortest_reaching", "collision_aware")
 
 
@@ -521,7 +524,9 @@ class HierarchicalPlan:
         exact_kept: per iteration, whether the exact rule (``HierarchicalPlanner``'s
             ``exact_check``) put back the segment's straight or unpolished DD plan.
         first_leg: per iteration, :attr:`SparsePlan.first_leg` of its SD plan ("" for every
-            iteration of replan "once").
+            iteration of replan "once"; "backtrack" where backtracking took another candidate).
+        backtracked: rounds in which backtracking (``HierarchicalPlanner``'s ``backtracks``)
+            took another SD candidate.
     """
 
     trajectory: np.ndarray
@@ -534,6 +539,7 @@ class HierarchicalPlan:
     placed: int = 0
     exact_kept: list = field(default_factory=list)
     first_leg: list = field(default_factory=list)
+    backtracked: int = 0
 
     @property
     def dd_calls(self) -> int:
@@ -629,16 +635,29 @@ class HierarchicalPlanner:
             refined local plan in collision, the unpolished DD plan or else the straight one
             is put back where the checker finds it free (its points then stay fixed while the
             rest is polished again). Plans the checker finds free are never touched.
+        backtracks: every_waypoint, with ``exact_check`` and the SparseDiffusion's free-first-leg
+            rule on (a ``placer`` and ``leg_batches`` >= 0: building maps): up to this many
+            rounds of backtracking (ours). When the exact checker still finds iterations'
+            local plans in collision after DD, polishing and the exact rule, the first of them
+            (or else the iteration before it, which chose where it starts; then the next
+            colliding one, at most BACKTRACK_TRIES iterations a round) takes another candidate of its SD batch instead: the best-ranked
+            one whose first leg (placed and repaired) gets a local plan the checker finds
+            free, the candidates' local stages run in one batch. The iterations after it are
+            planned again from its new waypoint. 0 turns it off. :attr:`HierarchicalPlan.
+            backtracked` counts the rounds that took a candidate.
     """
 
     def __init__(self, sparse: SparseDiffusion, dense_checkpoint, *, costmap, footprint_points,
                  cost_config=None, dense: DenseConfig | None = None, device: str = "cpu",
                  replan: str = "every_waypoint", exact_check=None,
-                 replan_spacing: float | None = None) -> None:
+                 replan_spacing: float | None = None, backtracks: int = BACKTRACKS) -> None:
         if replan not in REPLAN_POLICIES:
             raise EcahdError(f"replan policy {replan!r} is not one of {list(REPLAN_POLICIES)}")
+        if int(backtracks) != backtracks or backtracks < 0:
+            raise EcahdError(f"backtracks must be an integer >= 0 (0: off), got {backtracks!r}")
         self.replan, self.replan_spacing = replan, check_replan_spacing(replan_spacing)
         self.exact_check = exact_check
+        self.backtracks = int(backtracks)
         from ecahd_core.cost import CostConfig
         from ecahd_core.diffusion import DiffusionSampler, SamplerConfig
         from ecahd_core.model_zoo import DEFAULT_DENSE_POINTS, dense_points, sample_steps
@@ -879,7 +898,6 @@ class HierarchicalPlanner:
 
     def plan(self, start, goal, *, generator: torch.Generator | None = None) -> HierarchicalPlan:
         """Run Algorithm 1 from ``start`` to ``goal`` ((2,) [m] each)."""
-        P_g = self.sparse.config.horizon
         S = torch.as_tensor(np.asarray(start, dtype=np.float32))
         G = torch.as_tensor(np.asarray(goal, dtype=np.float32))
         t_total = time.perf_counter()
@@ -887,6 +905,53 @@ class HierarchicalPlanner:
         global_plans, placed, first_leg = [], 0, []
         if self.replan == "once":
             return self._plan_once(S, G, generator, t_total)
+        sparse_plans: list = []  # per iteration its SD plan (None: a leg of a forced plan)
+        self._iterate(S, G, global_plans, first_leg, sparse_plans, times, generator)
+        stages = self._joined_stages(global_plans, generator)
+        backtracked = 0
+        for _ in range(self.backtracks if self._backtracking else 0):
+            bad = self._colliding(stages.plans, joined=True).tolist()
+            # the colliding iterations, each then the one before it (which chose where it starts)
+            tries = [j for i, b in enumerate(bad) if b for j in (i, i - 1)
+                     if j >= 0 and sparse_plans[j] is not None]
+            t0 = time.perf_counter()
+            q, alt = None, None
+            for j in list(dict.fromkeys(tries))[:BACKTRACK_TRIES]:
+                alt = self._free_alternative(sparse_plans[j], global_plans[j], generator)
+                if alt is not None:
+                    q = j
+                    break
+            times["backtrack"] = times.get("backtrack", 0.0) + (time.perf_counter() - t0) * 1e3
+            if alt is None:
+                break
+            backtracked += 1
+            del global_plans[q:], first_leg[q:], sparse_plans[q:]
+            global_plans.append(alt)
+            first_leg.append("backtrack")
+            sparse_plans.append(None)
+            if len(alt) > 2:
+                self._iterate(torch.as_tensor(alt[1], dtype=torch.float32), G, global_plans,
+                              first_leg, sparse_plans, times, generator)
+            stages = self._joined_stages(global_plans, generator)
+        placed += sum(sp.placed for sp in sparse_plans if sp is not None)
+        times.update(stages.timings_ms)
+        result = self._result(global_plans, stages, times, t_total, placed, first_leg)
+        return replace(result, backtracked=backtracked)
+
+    @property
+    def _backtracking(self) -> bool:
+        """Whether backtracking can act (see the class docstring)."""
+        sp = self.sparse
+        return (self.backtracks > 0 and self.exact_check is not None and self.dd is not None
+                and sp.placer is not None and sp.config.leg_batches >= 0)
+
+    def _iterate(self, S: torch.Tensor, G: torch.Tensor, global_plans: list, first_leg: list,
+                 sparse_plans: list, times: dict, generator) -> None:
+        """Algorithm 1's SD calls (lines 2-12) from ``S`` (2,) to ``G`` (2,), appending each
+        iteration's SD plan, first-leg note and SparsePlan to the lists, which hold the
+        iterations before (their count is the iteration index p)."""
+        P_g = self.sparse.config.horizon
+        p = len(global_plans)
         # Algorithm 1 line 1: P^g - 1 iterations, the last one reaching G. With waypoint spacing
         # by distance (SparseConfig.max_spacing) a plan may have more waypoints than its
         # horizon, and with a replan spacing the horizon stays up while G is far: the
@@ -900,7 +965,6 @@ class HierarchicalPlanner:
         # J and DD give each segment what it would get alone, and polishing (ours) descends J
         # over the joined path, start and goal fixed, so a waypoint near a wall may move (the
         # SD calls after it start from where SD put it).
-        p = 0
         while True:
             t0 = time.perf_counter()
             forced = p >= P_g - 2 + MAX_EXTRA_ITERATIONS
@@ -911,25 +975,55 @@ class HierarchicalPlanner:
                                         repair_legs=None if forced
                                         or self.sparse.config.warm_fraction
                                         else 1)  # lines 2-12; only t^g_p[0:2] is followed
-            waypoints, placed = sparse.waypoints, placed + sparse.placed
+            waypoints = sparse.waypoints
             times["sd"] += (time.perf_counter() - t0) * 1e3
             if forced:  # the whole plan to G, one iteration per leg
                 global_plans += [waypoints[q:] for q in range(len(waypoints) - 1)]
                 first_leg += [sparse.first_leg] + [""] * (len(waypoints) - 2)
-                p += len(waypoints) - 1
-                break
+                sparse_plans += [sparse] + [None] * (len(waypoints) - 2)
+                return
             global_plans.append(waypoints)
             first_leg.append(sparse.first_leg)
+            sparse_plans.append(sparse)
             S = torch.as_tensor(waypoints[1], dtype=torch.float32)  # MoveAgent
             p += 1
             if len(waypoints) == 2:
-                break
+                return
+
+    def _joined_stages(self, global_plans: list, generator) -> LocalStages:
+        """Every iteration's local stage (lines 13-18) in one batch, polished as one path."""
         ends = torch.as_tensor(np.stack([w[:2] for w in global_plans]), dtype=torch.float32)
-        stages = self.local_stages(ends[:, 0], ends[:, 1],
-                                   end_fixed=torch.ones(p, dtype=torch.bool), joined=True,
-                                   generator=generator)  # lines 13-18
-        times.update(stages.timings_ms)
-        return self._result(global_plans, stages, times, t_total, placed, first_leg)
+        return self.local_stages(ends[:, 0], ends[:, 1],
+                                 end_fixed=torch.ones(len(global_plans), dtype=torch.bool),
+                                 joined=True, generator=generator)
+
+    def _free_alternative(self, sparse: SparsePlan, followed: np.ndarray, generator
+                          ) -> np.ndarray | None:
+        """Backtracking (``backtracks``): of the other candidates of ``sparse`` (the SD plan of
+        an iteration whose local plan collides; ``followed`` (P, 2) [m] its waypoints as
+        followed), in the selection's order, the placed and repaired waypoints (P', 2) [m] of
+        the first whose first leg differs from ``followed``'s and whose local plan (one batch
+        of local stages, both ends fixed) the exact checker finds free; None if none is."""
+        sd, cfg = self.sparse, self.sparse.config
+        cands = sparse.candidates
+        goal = cands[sparse.best, -1]
+        order = rank_candidates(cands, goal, epsilon=cfg.epsilon, rule=cfg.selection,
+                                collision_costs=sparse.collision_costs,
+                                collision_tolerance=cfg.collision_tolerance)
+        options = []
+        for k in order:
+            waypoints, _ = sd._place(cands[k], legs=1)
+            if len(waypoints) >= 2 and not any(
+                    np.allclose(waypoints[1], w[1]) for w in [followed] + options):
+                options.append(waypoints)
+        if not options:
+            return None
+        a = torch.as_tensor(np.stack([w[0] for w in options]), dtype=torch.float32)
+        b = torch.as_tensor(np.stack([w[1] for w in options]), dtype=torch.float32)
+        stages = self.local_stages(a, b, end_fixed=torch.ones(len(options), dtype=torch.bool),
+                                   generator=generator)
+        bad = self._colliding(stages.plans, joined=False).tolist()
+        return next((w for w, b_ in zip(options, bad) if not b_), None)
 
     def _plan_once(self, S: torch.Tensor, G: torch.Tensor, generator, t_total: float
                    ) -> HierarchicalPlan:

@@ -516,3 +516,42 @@ def test_with_no_free_first_leg_further_batches_get_one_waypoint_more_each():
     assert asked[:2] == [3, 4] and max(asked) == top and len(asked) == top + 2
     with pytest.raises(EcahdError, match="leg_batches"):
         SparseConfig(leg_batches=-2)
+
+
+def test_backtracking_takes_another_candidate_where_a_local_plan_still_collides():
+    """A stand-in checker with a speck on the first re-plan's waypoint: every local plan to it
+    collides, so without backtracking the plan keeps the collision; with it the first iteration
+    takes another candidate of its SD batch and the iterations after it are planned again."""
+    from ecahd_core.placement import WaypointPlacer
+
+    fp = make_footprint("circle")
+    cc = CostConfig()
+
+    def planner(check, backtracks, placer=True):
+        sd = SparseDiffusion(load_model("sd", GRID, footprint=fp), SparseConfig(num_candidates=10),
+                             placer=WaypointPlacer(GRID, fp, reach=1.0) if placer else None)
+        return HierarchicalPlanner(sd, load_model("dd", GRID, footprint=fp),
+                                   costmap=cc.make_costmap(GRID), footprint_points=fp.points,
+                                   cost_config=cc, exact_check=check, backtracks=backtracks)
+
+    start, goal = np.array([1.5, 1.5]), np.array([10.5, 7.5])
+    run = lambda hd: hd.plan(start, goal, generator=torch.Generator().manual_seed(0))  # noqa: E731
+    free = lambda path: np.zeros(len(path) - 1, dtype=bool)  # noqa: E731
+    base = run(planner(free, 2))
+    assert base.backtracked == 0 and "backtrack" not in base.first_leg
+    check = _speck_checker(base.global_plans[0][1][None], 0.3)
+    off = run(planner(check, 0))
+    assert check(off.trajectory).any() and off.backtracked == 0
+    ours = run(planner(check, 2))
+    assert ours.backtracked >= 1 and "backtrack" in ours.first_leg
+    assert check(ours.trajectory).sum() < check(off.trajectory).sum()
+    assert len(ours.first_leg) == len(ours.global_plans) == len(ours.segments)
+    assert np.allclose(ours.trajectory[0], start) and np.allclose(ours.trajectory[-1], goal,
+                                                                  atol=1e-5)
+    for a, b in zip(ours.segments, ours.segments[1:]):
+        assert np.allclose(a[-1], b[0])
+    # without waypoint placement (maze2d-large's setting) it never acts: the paper's plans
+    plain = run(planner(check, 2, placer=False))
+    assert plain.backtracked == 0
+    with pytest.raises(EcahdError, match="backtracks"):
+        planner(free, -1)

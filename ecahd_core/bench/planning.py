@@ -36,7 +36,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ecahd_core.errors import EcahdError
-from ecahd_core.placement import LEG_BATCHES
+from ecahd_core.placement import BACKTRACKS, LEG_BATCHES
 
 log = logging.getLogger(__name__)
 
@@ -95,6 +95,7 @@ class PlanningBenchSettings:
     replan_spacing: float | None = None  # [m] HierarchicalPlanner's (None: by the map; 0: off)
     precision: str = "fp32"  # the SD Transformer's inference precision (SparseConfig.precision)
     leg_batches: int = LEG_BATCHES  # SparseConfig.leg_batches: a free first leg (-1: off)
+    backtracks: int = BACKTRACKS  # HierarchicalPlanner's backtracking rounds (0: off)
     ablation: bool = True
     guidance: str = "both"  # diffusion methods with and without guidance, or "on" / "off" only
     safety_net: bool = True  # ours: judge HD / ECAHD with and without the net (ecahd_core.safety)
@@ -124,6 +125,7 @@ class CellResult:
     variant: str = ""  # Table II: cost mode (+ dilation)
     exact_rule_rate: float | None = None  # HD: % of plans where the exact rule acted
     first_leg_rate: float | None = None  # HD: % of plans where SD's free-first-leg rule acted
+    backtrack_rate: float | None = None  # HD: % of plans where backtracking took a candidate
     # the same paths through the safety net (HD cells when settings.safety_net; None otherwise)
     net_collision_free: float | None = None  # % after the net
     net_success_free: float | None = None
@@ -248,6 +250,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                                              keep_better=settings.keep_better),
                                          replan=settings.replan,
                                          replan_spacing=spacings[robot],
+                                         backtracks=settings.backtracks,
                                          exact_check=(exact_check_for(grid, fp)
                                                       if settings.exact_rule and not variant
                                                       else None))
@@ -264,7 +267,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                         retries=settings.net_retries, resamples=settings.net_resamples),
                                     planner=hd, astar=astar_for(robot, fp))
                     net_gen = torch.Generator().manual_seed(settings.sample_seed + 1)
-        paths, times, dd, kept, switched = [], [], [], [], []
+        paths, times, dd, kept, switched, backtracked = [], [], [], [], [], []
         net_paths, net_times, net_rules = [], [], []
         label = f"{METHOD_LABELS[method]}{' guided' if guidance else ''} {robot} {variant}".strip()
         for prob in tqdm(problems, desc=label, disable=not progress, leave=False):
@@ -276,6 +279,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                 dd.extend(dd_segs)
                 kept.append(any(last[0].exact_kept))
                 switched.append(last[0].first_leg_changed)
+                backtracked.append(last[0].backtracked > 0)
             if net is not None:  # the same path through the net, timed on its own
                 safe = net.apply(paths[-1], segments=last[0].segments, generator=net_gen)
                 net_paths.append(safe.path)
@@ -286,6 +290,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
         if kept:
             cell.exact_rule_rate = 100 * float(np.mean(kept))
             cell.first_leg_rate = 100 * float(np.mean(switched))
+            cell.backtrack_rate = 100 * float(np.mean(backtracked))
         if net is not None:
             after = _judge(net_paths, net_times, dd, problems, fp, grid, method=method,
                            guidance=guidance, robot=robot)
@@ -327,7 +332,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                "guidance_space": settings.guidance_space, "margin": margin,
                "dd_retries": settings.dd_retries, "polish_steps": settings.polish_steps,
                "keep_better": settings.keep_better, "exact_rule": settings.exact_rule,
-               "leg_batches": settings.leg_batches,
+               "leg_batches": settings.leg_batches, "backtracks": settings.backtracks,
                "replan": settings.replan, "warm_fraction": settings.warm_fraction,
                # one number when every robot's model asked for the same, else per robot
                "replan_spacing": (next(iter(spacings.values()))
@@ -385,6 +390,11 @@ def format_markdown(r: PlanningBenchResult) -> str:
                 f"(up to {c['leg_batches']} more batches)"
                 if c.get("place_reach") and c.get("leg_batches", -1) >= 0
                 and c["replan"] == "every_waypoint" else "")
+             + (f", a re-plan whose local plan still collides takes another candidate (up to "
+                f"{c['backtracks']} rounds)"
+                if c.get("place_reach") and c.get("leg_batches", -1) >= 0
+                and c.get("backtracks") and c["replan"] == "every_waypoint"
+                and c.get("exact_rule") else "")
              + ", "
              f"torch {c['torch']} with {c['threads']} thread(s). Each cell: ours / paper"
              + ("." if c["map"] == "maze2d-large" else
@@ -432,11 +442,13 @@ def format_markdown(r: PlanningBenchResult) -> str:
                   "(HierarchicalPlanner's exact_check; counted in ECAHD alone). First leg: share "
                   "of plans where a re-plan took another SD candidate, or one of a further "
                   "batch, because the selected one's first leg crossed a wall "
-                  "(SparseConfig.leg_batches; counted in ECAHD alone).", "",
+                  "(SparseConfig.leg_batches; counted in ECAHD alone). Backtrack: share of plans "
+                  "where a re-plan whose local plan still collided took another SD candidate "
+                  "(HierarchicalPlanner's backtracks; counted in ECAHD alone).", "",
                   "| method | guidance | robot | collision-free % | success & free % | exact rule % "
-                  "| first leg % | retry % | resample % | fallback % | unsafe % | time mean ms | "
+                  "| first leg % | backtrack % | retry % | resample % | fallback % | unsafe % | time mean ms | "
                   "time median ms | time p95 ms |",
-                  "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+                  "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for x in netted:
             lines.append(
                 f"| {METHOD_LABELS[x.method]}{' (ECAHD)' if x.guidance else ''} | "
@@ -445,6 +457,7 @@ def format_markdown(r: PlanningBenchResult) -> str:
                 f"{x.success_free:.1f} → {x.net_success_free:.1f} | "
                 f"{'–' if x.exact_rule_rate is None else f'{x.exact_rule_rate:.1f}'} | "
                 f"{'–' if x.first_leg_rate is None else f'{x.first_leg_rate:.1f}'} | "
+                f"{'–' if x.backtrack_rate is None else f'{x.backtrack_rate:.1f}'} | "
                 f"{x.net_retry_rate:.1f} | "
                 f"{'–' if x.net_resample_rate is None else f'{x.net_resample_rate:.1f}'} | "
                 f"{x.net_fallback_rate:.1f} | {x.net_unsafe_rate:.1f} | "

@@ -226,6 +226,12 @@ def _add_planning_arguments(parser: argparse.ArgumentParser) -> None:
                              "still crosses a wall after leg repair takes another SD candidate "
                              "whose first leg does not, else one of up to K more batches (one "
                              "waypoint more each; ours; 0: the other candidates only; -1: off)")
+    parser.add_argument("--backtracks", type=int, default=d.backtracks, metavar="K",
+                        help="HD, every_waypoint, with placement and the exact rule on: up to K "
+                             "rounds in which a re-plan whose local plan the exact checker "
+                             "still finds in collision (or the re-plan before it) takes another "
+                             "SD candidate whose local plan is free, and the rest is planned "
+                             "again (ours; 0: off)")
     parser.add_argument("--guidance", choices=tuple(GUIDANCE_RUNS), default=d.guidance,
                         help="run the diffusion methods with and without J's guidance, or only "
                              "one of the two (on: ECAHD's own setting)")
@@ -250,7 +256,7 @@ def _run_planning(args: argparse.Namespace) -> int:
         replan=args.replan, warm_fraction=args.warm_fraction, max_spacing=args.max_spacing,
         place_reach=args.place_reach, ablation=not args.no_ablation, precision=args.precision,
         net_resamples=args.net_resamples, replan_spacing=args.replan_spacing,
-        guidance=args.guidance, leg_batches=args.leg_batches)
+        guidance=args.guidance, leg_batches=args.leg_batches, backtracks=args.backtracks)
     result = run_planning_benchmark(settings, progress=not args.no_progress)
     md = format_markdown(result)
     print(md)

@@ -294,4 +294,6 @@ def _plan_diffusion(args, grid, footprint, start, goal):
                 if refined else np.zeros((0, 3)))
     return (plan.trajectory, plan.global_plans[0], [], dict(plan.timings_ms), plan.dd_calls,
             dd_poses, plan.segments, hd, {"waypoints_placed": plan.placed,
-                                          "exact_rule_segments": int(sum(plan.exact_kept))})
+                                          "exact_rule_segments": int(sum(plan.exact_kept)),
+                                          "first_leg_changed": plan.first_leg_changed,
+                                          "backtracked": plan.backtracked})
