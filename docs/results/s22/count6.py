@@ -16,7 +16,7 @@ grid, fp = load_map(mp), make_footprint(robot)
 cost = CollisionCost.build(grid, fp).as_tuple()
 sd = SparseDiffusion(load_model("sd", grid, footprint=fp), SparseConfig(selection="collision_aware", precision="auto"), cost=cost, placer=placer_for(grid, fp, None))
 spacing = auto_replan_spacing(grid, sd.expert_spacing)
-hd = HierarchicalPlanner(sd, load_model("dd", grid, footprint=fp), costmap=cost[0], footprint_points=cost[1], cost_config=cost[2], dense=DenseConfig(**json.loads(os.environ.get("DENSE", "{}"))), exact_check=exact_check_for(grid, fp), replan_spacing=spacing)
+hd = HierarchicalPlanner(sd, load_model("dd", grid, footprint=fp), costmap=cost[0], footprint_points=cost[1], cost_config=cost[2], dense=DenseConfig(**json.loads(os.environ.get("DENSE", "{}"))), exact_check=exact_check_for(grid, fp), replan_spacing=spacing, backtracks=int(os.environ.get("BT", "2")))
 gen = torch.Generator().manual_seed(0)
 bad, ts = [], []
 for k, prob in enumerate(make_problems(grid, n, seed=seed)):
