@@ -640,8 +640,8 @@ class HierarchicalPlanner:
             rounds of backtracking (ours). When the exact checker still finds iterations'
             local plans in collision after DD, polishing and the exact rule, the first of them
             (or else the iteration before it, which chose where it starts; then the next
-            colliding one, at most BACKTRACK_TRIES iterations a round) takes another candidate of its SD batch instead: the best-ranked
-            one whose first leg (placed and repaired) gets a local plan the checker finds
+            colliding one, at most BACKTRACK_TRIES iterations a round) takes another candidate
+            of its SD batch instead: the best-ranked one whose first leg (placed and repaired) gets a local plan the checker finds
             free, the candidates' local stages run in one batch. The iterations after it are
             planned again from its new waypoint. 0 turns it off. :attr:`HierarchicalPlan.
             backtracked` counts the rounds that took a candidate.
@@ -902,9 +902,9 @@ class HierarchicalPlanner:
         G = torch.as_tensor(np.asarray(goal, dtype=np.float32))
         t_total = time.perf_counter()
         times = {"sd": 0.0}
-        global_plans, placed, first_leg = [], 0, []
         if self.replan == "once":
             return self._plan_once(S, G, generator, t_total)
+        global_plans, first_leg = [], []
         sparse_plans: list = []  # per iteration its SD plan (None: a leg of a forced plan)
         self._iterate(S, G, global_plans, first_leg, sparse_plans, times, generator)
         stages = self._joined_stages(global_plans, generator)
@@ -933,7 +933,7 @@ class HierarchicalPlanner:
                 self._iterate(torch.as_tensor(alt[1], dtype=torch.float32), G, global_plans,
                               first_leg, sparse_plans, times, generator)
             stages = self._joined_stages(global_plans, generator)
-        placed += sum(sp.placed for sp in sparse_plans if sp is not None)
+        placed = sum(sp.placed for sp in sparse_plans if sp is not None)
         times.update(stages.timings_ms)
         result = self._result(global_plans, stages, times, t_total, placed, first_leg)
         return replace(result, backtracked=backtracked)

@@ -361,6 +361,9 @@ def _spacing_text(spacing) -> str:
 def format_markdown(r: PlanningBenchResult) -> str:
     """Table I layout (ours beside the paper's), the full per-cell table, and Table II."""
     c = r.context
+    # the free-first-leg rule (and backtracking with it) acts with placement, every_waypoint
+    leg_rule = bool(c.get("place_reach") and c.get("leg_batches", -1) >= 0
+                    and c["replan"] == "every_waypoint")
     cell = {(x.method, x.guidance, x.robot): x for x in r.cells}
     robots = [rb for rb in ROBOTS if any(k[2] == rb for k in cell)]
     cols = [(m, g) for m in ("fd", "sd", "hd") for g in (False, True) if (m, g, robots[0]) in cell]
@@ -387,14 +390,10 @@ def format_markdown(r: PlanningBenchResult) -> str:
              + (f", SD's waypoints in walls placed in free space within {c['place_reach']:g} m "
                 "and legs crossing walls repaired" if c.get("place_reach") else "")
              + (f", a re-plan whose first leg still crosses a wall takes another candidate "
-                f"(up to {c['leg_batches']} more batches)"
-                if c.get("place_reach") and c.get("leg_batches", -1) >= 0
-                and c["replan"] == "every_waypoint" else "")
+                f"(up to {c['leg_batches']} more batches)" if leg_rule else "")
              + (f", a re-plan whose local plan still collides takes another candidate (up to "
                 f"{c['backtracks']} rounds)"
-                if c.get("place_reach") and c.get("leg_batches", -1) >= 0
-                and c.get("backtracks") and c["replan"] == "every_waypoint"
-                and c.get("exact_rule") else "")
+                if leg_rule and c.get("backtracks") and c.get("exact_rule") else "")
              + ", "
              f"torch {c['torch']} with {c['threads']} thread(s). Each cell: ours / paper"
              + ("." if c["map"] == "maze2d-large" else
