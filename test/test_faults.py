@@ -389,6 +389,19 @@ def wait_for(condition, what: str, timeout: float = 10.0) -> None:
         time.sleep(0.01)
 
 
+def answered(send, condition, what: str, timeout: float = 20.0, every: float = 2.0,
+             most: int = 5) -> None:
+    """``send()``, then again every ``every`` s (at most ``most`` times) until ``condition()``:
+    for a valid message that in-process DDS may lose (the test is of the node's answer)."""
+    deadline, sent, last = time.monotonic() + timeout, 0, 0.0
+    while not condition():
+        assert time.monotonic() < deadline, f"not within {timeout:g} s: {what} (sent {sent}x)"
+        if sent < most and (sent == 0 or time.monotonic() > last + every):
+            send()
+            sent, last = sent + 1, time.monotonic()
+        time.sleep(0.01)
+
+
 class Logs:
     """The error lines each node wrote to stderr (rcutils logs there), read through capfd.
 
@@ -760,11 +773,13 @@ def test_malformed_input_to_planner_and_refiner(ros_context, capfd, tmp_path):
         long_plan = np.stack([np.linspace(WEST[0], 4.5, 10_000), np.full(10_000, Y)], axis=1)
         mark = logs.mark()
         n = len(got["cmds"])
-        publish("plan", plan_msg(long_plan))
-        wait_for(lambda: any(v > 0 for v, _ in got["cmds"][n:]), "driving the long plan")
+        # (re-published like bad_messages: in-process DDS here loses a message now and then;
+        # one lost goal failed CI once, "not within 10 s: a plan to the valid goal")
+        answered(lambda: publish("plan", plan_msg(long_plan)),
+                 lambda: any(v > 0 for v, _ in got["cmds"][n:]), "driving the long plan")
         assert not logs.errors("local_refiner", mark)
-        publish("goal_pose", goal_msg(4.5, Y + 0.2))
-        wait_for(lambda: got["plans"], "a plan to the valid goal")
+        answered(lambda: publish("goal_pose", goal_msg(4.5, Y + 0.2)),
+                 lambda: got["plans"], "a plan to the valid goal")
         assert np.allclose(got["plans"][-1][-1], (4.5, Y + 0.2))
         n = len(got["cmds"])
         wait_for(lambda: any(v > 0 for v, _ in got["cmds"][n:]), "driving the planned path")
