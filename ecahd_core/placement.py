@@ -84,6 +84,9 @@ class WaypointPlacer:
         # a circle of the inscribed radius centred on a cell centre this near an occupied cell
         # centre may overlap that cell (whose corner lies half a cell diagonal nearer)
         self._near = footprint.inscribed_radius + math.sqrt(0.5) * grid.resolution
+        # a straight leg's interior sweeps a band of the footprint's half-width across its
+        # heading (wider than the inscribed radius for a robot wider than long, the humanoid)
+        self._band, self._trim = leg_band(footprint)
 
     def __call__(self, waypoints, *, last_reach: float | None = 0.0,
                  legs: int | None = None) -> tuple[np.ndarray, int]:
@@ -275,11 +278,14 @@ class WaypointPlacer:
         return None
 
     def wall_length(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """Length [m] of each straight leg from ``a`` (2,) or (K, 2) to ``b`` (K, 2) where a
-        circle of the footprint's inscribed radius may touch an occupied cell (the distance
+        """Length [m] of each straight leg from ``a`` (2,) or (K, 2) to ``b`` (K, 2) where the
+        footprint moving along it may touch an occupied cell -> (K,): where a circle of the
+        footprint's inscribed radius may touch one, or, farther than :func:`leg_band`'s trim
+        from both ends, a circle of its half-width across the heading (a circle that lies
+        within the swept footprint, so a leg this finds near a wall collides; the distance
         transform of cell centres, less half a cell diagonal; each leg sampled at
         ceil(length / resolution) + 1 evenly spaced points, so a leg's value does not depend on
-        the others) -> (K,)."""
+        the others)."""
         grid = self.grid
         res, (ox, oy) = grid.resolution, grid.origin[:2]
         b = np.asarray(b, dtype=np.float64).reshape(-1, 2)
@@ -297,6 +303,10 @@ class WaypointPlacer:
         row = np.fmin(np.fmax(np.floor((a[:, 1:] + t * d[:, 1:] - oy) / res), -1), grid.height)
         idx = (row.astype(np.intp) + 1) * (grid.width + 2) + col.astype(np.intp) + 1
         near = self._near_cells.take(idx)  # (K, n)
+        if self._band is not None:
+            along = t * length[:, None]  # (K, n) [m] from a
+            inner = (along >= self._trim) & (along <= length[:, None] - self._trim)
+            near |= inner & self._band_cells.take(idx)
         return (near & valid).sum(axis=1) / counts * length
 
     @cached_property
@@ -305,6 +315,27 @@ class WaypointPlacer:
         centre lies nearer an occupied cell centre than ``_near`` (:meth:`wall_length`'s test,
         the same as ``StaticClearance.wall_distance(...) < _near``)."""
         return np.pad(self.grid.free_distance < self._near, 1, constant_values=True).ravel()
+
+    @cached_property
+    def _band_cells(self) -> np.ndarray:
+        """As :attr:`_near_cells` for a circle of the footprint's half-width (:func:`leg_band`)."""
+        near = self._band + math.sqrt(0.5) * self.grid.resolution
+        return np.pad(self.grid.free_distance < near, 1, constant_values=True).ravel()
+
+
+def leg_band(footprint) -> tuple[float | None, float]:
+    """(half-width [m] of the band a straight leg's interior sweeps, trim [m]): the footprint's
+    half-width across its heading (its polygon's largest |y|) where that exceeds its inscribed
+    radius (else None: the inscribed circle is the test everywhere, as for a circle or a robot
+    longer than wide), and how far from each end of a leg a circle of that half-width would
+    reach beyond the footprint's front or back (half-width - the shorter of its front and back
+    half-lengths; 0.125 m for the 0.25 x 0.5 m humanoid)."""
+    poly = np.asarray(footprint.polygon, dtype=np.float64)
+    half = float(np.abs(poly[:, 1]).max())
+    if footprint.is_circle or half <= footprint.inscribed_radius + 1e-9:
+        return None, 0.0
+    ahead = min(float(poly[:, 0].max()), float(-poly[:, 0].min()))
+    return half, max(0.0, half - ahead)
 
 
 def _spread(points: np.ndarray, n: int) -> np.ndarray:

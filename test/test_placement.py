@@ -195,3 +195,29 @@ def test_wall_length_samples_each_leg_and_counts_off_map_as_wall():
     np.testing.assert_array_equal(placer.wall_length(a[7], b[7:8]), got[7:8])
     off = np.array([[lo[0] - 0.5, lo[1]]])  # a leg wholly off the map is wall all along
     assert placer.wall_length(off[0], off + [1.0, 0.0])[0] == pytest.approx(1.0)
+
+
+def test_a_robot_wider_than_long_is_judged_by_its_half_width_along_a_leg_but_not_past_its_ends():
+    """The humanoid (0.25 m long, 0.5 m wide) walking past the end of a wall 0.18 m to its
+    side overlaps it (half-width 0.25 m), though its inscribed circle (0.125 m) clears it: the
+    leg counts as wall, and the exact checker agrees. A leg that stops 0.2 m before a wall
+    straight ahead keeps the front (0.125 m) clear: the band's circle is trimmed at the ends,
+    so that leg counts no wall. The quadruped (longer than wide) keeps the inscribed test."""
+    from ecahd_core.placement import leg_band
+
+    grid = block_map(0.05)  # the block's left end at x = 1.0, y in [1.5, 2.5]
+    human, quad = make_footprint("humanoid"), make_footprint("quadruped")
+    assert leg_band(human) == (0.25, 0.125)
+    assert leg_band(quad) == (None, 0.0) and leg_band(make_footprint("circle")) == (None, 0.0)
+    past = np.array([[0.82, 0.5], [0.82, 3.5]])  # x 0.82: 0.18 m left of the block's end
+    for robot, walls in ((human, True), (quad, False)):
+        placer = WaypointPlacer(grid, robot)
+        assert bool(placer.leg_walls(past)[0] > 0) == walls, robot.name
+        assert bool(check_collision(past, robot, grid).collision_free) != walls, robot.name
+    placer = WaypointPlacer(grid, human)
+    ahead = np.array([[3.0, 0.4], [3.0, 1.3]])  # stops 0.2 m below the block, facing it
+    assert check_collision(ahead, human, grid).collision_free
+    assert placer.leg_walls(ahead)[0] == 0
+    # the same leg judged by a circle of the half-width all along would have counted wall
+    square = make_footprint("[[0.25, 0.25], [-0.25, 0.25], [-0.25, -0.25], [0.25, -0.25]]")
+    assert WaypointPlacer(grid, square).leg_walls(ahead)[0] > 0
