@@ -28,6 +28,14 @@ LEG_REPAIRS = 2
 # iterations a backtracking round (HierarchicalPlanner's ``backtracks``) may try: each tries its
 # whole SD batch through placement, repair and one batch of local stages (hundreds of ms)
 BACKTRACK_TRIES = 4
+# the subgoal rule (HierarchicalPlanner's ``subgoals``): a re-plan beyond Algorithm 1's P^g - 1
+# iterations whose first leg is not free or brings the robot less than SUBGOAL_TRIGGER [m]
+# nearer the goal by its cost-to-go (progress.GoalField) plans toward the farthest point of the
+# shortest route within SUBGOAL_REACH x the replan spacing that a free straight leg reaches,
+# kept if its first leg is free and gains SUBGOAL_GAIN [m] on the other's
+SUBGOAL_TRIGGER = 0.5
+SUBGOAL_REACH = 1.0
+SUBGOAL_GAIN = 0.1
 SELECTION_RULES = ("shortest_reaching", "collision_aware")
 
 
@@ -524,7 +532,8 @@ class HierarchicalPlan:
         exact_kept: per iteration, whether the exact rule (``HierarchicalPlanner``'s
             ``exact_check``) put back the segment's straight or unpolished DD plan.
         first_leg: per iteration, :attr:`SparsePlan.first_leg` of its SD plan ("" for every
-            iteration of replan "once"; "backtrack" where backtracking took another candidate).
+            iteration of replan "once"; "backtrack" where backtracking took another candidate;
+            "subgoal" where the subgoal rule drew it toward a subgoal).
         backtracked: rounds in which backtracking (``HierarchicalPlanner``'s ``backtracks``)
             took another SD candidate.
     """
@@ -549,6 +558,12 @@ class HierarchicalPlan:
     def first_leg_changed(self) -> bool:
         """Whether SparseConfig.leg_batches's rule changed any iteration's SD plan."""
         return any(f in ("other", "batch") for f in self.first_leg)
+
+    @property
+    def subgoals(self) -> int:
+        """Iterations whose SD plan the subgoal rule (HierarchicalPlanner's ``subgoals``)
+        drew toward a subgoal."""
+        return self.first_leg.count("subgoal")
 
 
 @dataclass(frozen=True)
@@ -645,12 +660,23 @@ class HierarchicalPlanner:
             free, the candidates' local stages run in one batch. The iterations after it are
             planned again from its new waypoint. 0 turns it off. :attr:`HierarchicalPlan.
             backtracked` counts the rounds that took a candidate.
+        subgoals: the subgoal rule (ours; every_waypoint with a replan spacing and the
+            SparseDiffusion's free-first-leg rule on: building maps). A re-plan beyond
+            Algorithm 1's P^g - 1 iterations (the loop circling a wall with the goal behind it)
+            whose first leg is not free or brings the robot less than SUBGOAL_TRIGGER nearer
+            the goal by the goal's cost-to-go over the free space the footprint fits
+            (:class:`~ecahd_core.progress.GoalField`, one coarse Dijkstra per goal) is drawn
+            again by SD toward a subgoal: of the route's points within SUBGOAL_REACH x the
+            replan spacing, the farthest a straight leg reaches free (that plan followed by the
+            goal), kept if its first leg is free and gains SUBGOAL_GAIN on the other's. SD still draws the waypoints and DD the local plans.
+            :attr:`HierarchicalPlan.subgoals` counts the iterations it changed.
     """
 
     def __init__(self, sparse: SparseDiffusion, dense_checkpoint, *, costmap, footprint_points,
                  cost_config=None, dense: DenseConfig | None = None, device: str = "cpu",
                  replan: str = "every_waypoint", exact_check=None,
-                 replan_spacing: float | None = None, backtracks: int = BACKTRACKS) -> None:
+                 replan_spacing: float | None = None, backtracks: int = BACKTRACKS,
+                 subgoals: bool = True) -> None:
         if replan not in REPLAN_POLICIES:
             raise EcahdError(f"replan policy {replan!r} is not one of {list(REPLAN_POLICIES)}")
         if int(backtracks) != backtracks or backtracks < 0:
@@ -658,6 +684,9 @@ class HierarchicalPlanner:
         self.replan, self.replan_spacing = replan, check_replan_spacing(replan_spacing)
         self.exact_check = exact_check
         self.backtracks = int(backtracks)
+        self.subgoals = bool(subgoals)
+        self._goal_field = None  # progress.GoalField, built on the first subgoal check
+        self._to_go = None  # (goal, progress.CostToGo) of the last goal
         from ecahd_core.cost import CostConfig
         from ecahd_core.diffusion import DiffusionSampler, SamplerConfig
         from ecahd_core.model_zoo import DEFAULT_DENSE_POINTS, dense_points, sample_steps
@@ -969,12 +998,16 @@ class HierarchicalPlanner:
             t0 = time.perf_counter()
             forced = p >= P_g - 2 + MAX_EXTRA_ITERATIONS
             horizon = replan_horizon(P_g, p, S.numpy(), G.numpy(), self.replan_spacing)
+            beyond = p >= P_g - 1 and not forced  # Algorithm 1 would have reached G by now
             sparse = self.sparse.replan(S.numpy(), G.numpy(),
                                         global_plans[-1] if global_plans else None,
                                         horizon=horizon, generator=generator,
                                         repair_legs=None if forced
                                         or self.sparse.config.warm_fraction
                                         else 1)  # lines 2-12; only t^g_p[0:2] is followed
+            if beyond and self._subgoaling:
+                sparse = self._toward_subgoal(S.numpy(), G.numpy(), sparse, p, times,
+                                              generator)
             waypoints = sparse.waypoints
             times["sd"] += (time.perf_counter() - t0) * 1e3
             if forced:  # the whole plan to G, one iteration per leg
@@ -989,6 +1022,59 @@ class HierarchicalPlanner:
             p += 1
             if len(waypoints) == 2:
                 return
+
+    @property
+    def _subgoaling(self) -> bool:
+        """Whether the subgoal rule can act (see the class docstring)."""
+        sp = self.sparse
+        return (self.subgoals and self.replan_spacing is not None and sp.placer is not None
+                and sp.config.leg_batches >= 0 and sp.config.warm_fraction == 0)
+
+    def _toward_subgoal(self, S: np.ndarray, G: np.ndarray, sparse: SparsePlan, p: int,
+                        times: dict, generator) -> SparsePlan:
+        """The subgoal rule (see the class docstring) on ``sparse``, the SD plan of iteration
+        ``p`` from ``S`` (2,) [m] toward ``G`` (2,) [m]: it, or SD's plan toward the subgoal
+        followed by ``G`` (first_leg "subgoal"). The cost-to-go's time is added to
+        ``times["goal_field"]`` [ms] (included in "sd")."""
+        to_go = self._cost_to_go(G, times)
+        if to_go is None:
+            return sparse
+        sd, wp = self.sparse, sparse.waypoints
+        g_start, g_next = to_go(wp[:2])
+        blocked = sd._leg_blocked(wp)
+        if not blocked and g_next <= g_start - SUBGOAL_TRIGGER:
+            return sparse
+        route = to_go.route(S, SUBGOAL_REACH * self.replan_spacing)
+        if route is None:
+            return sparse
+        # the farthest point of the route a straight leg from S reaches (the route's end if
+        # none does): SD then plans round the corner from there on
+        seen = np.flatnonzero(sd.placer.wall_length(np.broadcast_to(S, route.shape), route) == 0)
+        sub = route[seen[-1] if len(seen) else -1]
+        if np.linalg.norm(sub - S) < sd.placer.step:
+            return sparse
+        h = max(3, replan_horizon(sd.config.horizon, p, S, sub, self.replan_spacing))
+        alt = sd.plan(S, sub, horizon=h, generator=generator, repair_legs=1)
+        w = alt.waypoints
+        if sd._leg_blocked(w) or not (to_go(w[1:2])[0]
+                                      < (g_start if blocked else g_next) - SUBGOAL_GAIN):
+            return sparse
+        return replace(alt, waypoints=np.concatenate([w, G[None]]), first_leg="subgoal")
+
+    def _cost_to_go(self, G: np.ndarray, times: dict):
+        """The goal field's cost-to-go to ``G`` (2,) [m] (None: the goal has no free space
+        round it), one Dijkstra per goal, kept for the last goal."""
+        key = tuple(np.asarray(G, dtype=np.float64).tolist())
+        if self._to_go is None or self._to_go[0] != key:
+            t0 = time.perf_counter()
+            if self._goal_field is None:
+                from ecahd_core.progress import GoalField
+
+                placer = self.sparse.placer
+                self._goal_field = GoalField(placer.grid, placer.footprint)
+            self._to_go = (key, self._goal_field.to(G))
+            times["goal_field"] = times.get("goal_field", 0.0) + (time.perf_counter() - t0) * 1e3
+        return self._to_go[1]
 
     def _joined_stages(self, global_plans: list, generator) -> LocalStages:
         """Every iteration's local stage (lines 13-18) in one batch, polished as one path."""

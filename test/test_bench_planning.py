@@ -76,9 +76,10 @@ def test_safety_net_is_reported_beside_hd_and_leaves_its_numbers_alone():
             + b["net_unsafe_rate"] == pytest.approx(100.0 - b["collision_free"])
         assert b["first_leg_rate"] == 0.0  # replan once: every leg is SD's first plan's
         assert b["backtrack_rate"] == 0.0  # replan once (and maze2d-large): never backtracks
+        assert b["subgoal_rate"] == 0.0  # replan once: no re-plan loop
     text = format_markdown(runs[True])
     assert "safety net" in text and "resample %" in text and "fallback %" in text
-    assert "first leg %" in text and "backtrack %" in text
+    assert "first leg %" in text and "backtrack %" in text and "subgoal %" in text
     assert "safety net" not in format_markdown(runs[False])
 
 

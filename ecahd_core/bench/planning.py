@@ -96,6 +96,7 @@ class PlanningBenchSettings:
     precision: str = "fp32"  # the SD Transformer's inference precision (SparseConfig.precision)
     leg_batches: int = LEG_BATCHES  # SparseConfig.leg_batches: a free first leg (-1: off)
     backtracks: int = BACKTRACKS  # HierarchicalPlanner's backtracking rounds (0: off)
+    subgoals: bool = True  # HierarchicalPlanner's subgoal rule
     ablation: bool = True
     guidance: str = "both"  # diffusion methods with and without guidance, or "on" / "off" only
     safety_net: bool = True  # ours: judge HD / ECAHD with and without the net (ecahd_core.safety)
@@ -126,6 +127,7 @@ class CellResult:
     exact_rule_rate: float | None = None  # HD: % of plans where the exact rule acted
     first_leg_rate: float | None = None  # HD: % of plans where SD's free-first-leg rule acted
     backtrack_rate: float | None = None  # HD: % of plans where backtracking took a candidate
+    subgoal_rate: float | None = None  # HD: % of plans where the subgoal rule drew a re-plan
     # the same paths through the safety net (HD cells when settings.safety_net; None otherwise)
     net_collision_free: float | None = None  # % after the net
     net_success_free: float | None = None
@@ -251,6 +253,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                                          replan=settings.replan,
                                          replan_spacing=spacings[robot],
                                          backtracks=settings.backtracks,
+                                         subgoals=settings.subgoals,
                                          exact_check=(exact_check_for(grid, fp)
                                                       if settings.exact_rule and not variant
                                                       else None))
@@ -267,7 +270,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                         retries=settings.net_retries, resamples=settings.net_resamples),
                                     planner=hd, astar=astar_for(robot, fp))
                     net_gen = torch.Generator().manual_seed(settings.sample_seed + 1)
-        paths, times, dd, kept, switched, backtracked = [], [], [], [], [], []
+        paths, times, dd, kept, switched, backtracked, subgoaled = [], [], [], [], [], [], []
         net_paths, net_times, net_rules = [], [], []
         label = f"{METHOD_LABELS[method]}{' guided' if guidance else ''} {robot} {variant}".strip()
         for prob in tqdm(problems, desc=label, disable=not progress, leave=False):
@@ -280,6 +283,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                 kept.append(any(last[0].exact_kept))
                 switched.append(last[0].first_leg_changed)
                 backtracked.append(last[0].backtracked > 0)
+                subgoaled.append(last[0].subgoals > 0)
             if net is not None:  # the same path through the net, timed on its own
                 safe = net.apply(paths[-1], segments=last[0].segments, generator=net_gen)
                 net_paths.append(safe.path)
@@ -291,6 +295,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
             cell.exact_rule_rate = 100 * float(np.mean(kept))
             cell.first_leg_rate = 100 * float(np.mean(switched))
             cell.backtrack_rate = 100 * float(np.mean(backtracked))
+            cell.subgoal_rate = 100 * float(np.mean(subgoaled))
         if net is not None:
             after = _judge(net_paths, net_times, dd, problems, fp, grid, method=method,
                            guidance=guidance, robot=robot)
@@ -333,6 +338,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                "dd_retries": settings.dd_retries, "polish_steps": settings.polish_steps,
                "keep_better": settings.keep_better, "exact_rule": settings.exact_rule,
                "leg_batches": settings.leg_batches, "backtracks": settings.backtracks,
+               "subgoals": settings.subgoals,
                "replan": settings.replan, "warm_fraction": settings.warm_fraction,
                # one number when every robot's model asked for the same, else per robot
                "replan_spacing": (next(iter(spacings.values()))
@@ -394,6 +400,10 @@ def format_markdown(r: PlanningBenchResult) -> str:
              + (f", a re-plan whose local plan still collides takes another candidate (up to "
                 f"{c['backtracks']} rounds)"
                 if leg_rule and c.get("backtracks") and c.get("exact_rule") else "")
+             + (", a re-plan loop past P^g - 1 iterations that makes no progress by the goal's "
+                "cost-to-go plans toward a point along the shortest route"
+                if leg_rule and c.get("subgoals") and c.get("replan_spacing")
+                and c["replan"] == "every_waypoint" else "")
              + ", "
              f"torch {c['torch']} with {c['threads']} thread(s). Each cell: ours / paper"
              + ("." if c["map"] == "maze2d-large" else
@@ -443,11 +453,15 @@ def format_markdown(r: PlanningBenchResult) -> str:
                   "batch, because the selected one's first leg crossed a wall "
                   "(SparseConfig.leg_batches; counted in ECAHD alone). Backtrack: share of plans "
                   "where a re-plan whose local plan still collided took another SD candidate "
-                  "(HierarchicalPlanner's backtracks; counted in ECAHD alone).", "",
+                  "(HierarchicalPlanner's backtracks; counted in ECAHD alone). Subgoal: share of "
+                  "plans where a re-plan loop past P^g - 1 iterations drew SD toward a point "
+                  "along the shortest route because its plan's first leg made no progress by the "
+                  "goal's cost-to-go (HierarchicalPlanner's subgoals; SD draws the waypoints; "
+                  "counted in ECAHD alone).", "",
                   "| method | guidance | robot | collision-free % | success & free % | exact rule % "
-                  "| first leg % | backtrack % | retry % | resample % | fallback % | unsafe % | time mean ms | "
-                  "time median ms | time p95 ms |",
-                  "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+                  "| first leg % | backtrack % | subgoal % | retry % | resample % | fallback % | "
+                  "unsafe % | time mean ms | time median ms | time p95 ms |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for x in netted:
             lines.append(
                 f"| {METHOD_LABELS[x.method]}{' (ECAHD)' if x.guidance else ''} | "
@@ -457,6 +471,7 @@ def format_markdown(r: PlanningBenchResult) -> str:
                 f"{'–' if x.exact_rule_rate is None else f'{x.exact_rule_rate:.1f}'} | "
                 f"{'–' if x.first_leg_rate is None else f'{x.first_leg_rate:.1f}'} | "
                 f"{'–' if x.backtrack_rate is None else f'{x.backtrack_rate:.1f}'} | "
+                f"{'–' if x.subgoal_rate is None else f'{x.subgoal_rate:.1f}'} | "
                 f"{x.net_retry_rate:.1f} | "
                 f"{'–' if x.net_resample_rate is None else f'{x.net_resample_rate:.1f}'} | "
                 f"{x.net_fallback_rate:.1f} | {x.net_unsafe_rate:.1f} | "

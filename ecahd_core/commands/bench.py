@@ -232,6 +232,11 @@ def _add_planning_arguments(parser: argparse.ArgumentParser) -> None:
                              "still finds in collision (or the re-plan before it) takes another "
                              "SD candidate whose local plan is free, and the rest is planned "
                              "again (ours; 0: off)")
+    parser.add_argument("--no-subgoals", action="store_true",
+                        help="HD, every_waypoint, on building maps: turn off the subgoal rule "
+                             "(a re-plan loop past P^g - 1 iterations whose plan makes no "
+                             "progress by the goal's cost-to-go plans toward a point along the "
+                             "shortest route; ours)")
     parser.add_argument("--guidance", choices=tuple(GUIDANCE_RUNS), default=d.guidance,
                         help="run the diffusion methods with and without J's guidance, or only "
                              "one of the two (on: ECAHD's own setting)")
@@ -256,7 +261,8 @@ def _run_planning(args: argparse.Namespace) -> int:
         replan=args.replan, warm_fraction=args.warm_fraction, max_spacing=args.max_spacing,
         place_reach=args.place_reach, ablation=not args.no_ablation, precision=args.precision,
         net_resamples=args.net_resamples, replan_spacing=args.replan_spacing,
-        guidance=args.guidance, leg_batches=args.leg_batches, backtracks=args.backtracks)
+        guidance=args.guidance, leg_batches=args.leg_batches, backtracks=args.backtracks,
+        subgoals=not args.no_subgoals)
     result = run_planning_benchmark(settings, progress=not args.no_progress)
     md = format_markdown(result)
     print(md)

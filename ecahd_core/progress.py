@@ -1,0 +1,123 @@
+"""The goal's cost-to-go over the free space a footprint fits, for the re-plan loop's subgoal
+rule (ours, beyond the paper; :class:`~ecahd_core.planner.HierarchicalPlanner`'s
+``goal_field``).
+
+A re-plan loop (Algorithm 1 with a replan spacing) that has used its P^g - 1 iterations and is
+not at the goal is usually circling a wall with the goal behind it: SD's candidates all aim at
+the goal through the wall, placement puts their first waypoints back beside the wall, and the
+robot dithers there until the iterations run out and the last plan crosses the wall
+(docs/RESULTS.md, the session of 2026-12-04 13:58). The goal's cost-to-go (one Dijkstra over
+the coarse A* graph per goal, :class:`~ecahd_core.astar.CoarseAStarPlanner`) says which way the
+route round the wall goes; the subgoal rule then lets SD plan toward a point along that route.
+SD still draws every waypoint and DD every local plan.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ecahd_core.astar import (COARSE_BLOCK_SIZE, AStarPlanner, CoarseAStarPlanner,
+                              clearance_for_footprint)
+
+# [m] how far round a point without the clearance (a waypoint beside a wall) its cost-to-go
+# looks for cells that have it
+SNAP_REACH = 0.5
+
+
+class GoalField:
+    """Cost-to-go [m] to goals on one map for one footprint.
+
+    The coarse A* graph of the footprint's clearance (blocks of ``COARSE_BLOCK_SIZE``; built on
+    the first goal, about 0.9 s on a 60 x 60 m map at 0.03 m/cell) gives every node its cost to
+    the goal's node by one Dijkstra (50-80 ms on that map, 28 000 nodes); a point's cost-to-go
+    is the least, over its own cell's node or else the nodes within SNAP_REACH, of the node's
+    cost plus the straight distance to the node's representative cell.
+
+    Args:
+        grid: the GridMap.
+        footprint: the robot's Footprint (clearance as :func:`clearance_for_footprint`).
+    """
+
+    def __init__(self, grid, footprint) -> None:
+        self.grid = grid
+        self.clearance = clearance_for_footprint(footprint)
+        self._graph: CoarseAStarPlanner | None = None
+
+    @property
+    def graph(self) -> CoarseAStarPlanner:
+        """The coarse A* graph (built on first use)."""
+        if self._graph is None:
+            block = max(1, int(round(COARSE_BLOCK_SIZE / self.grid.resolution)))
+            self._graph = CoarseAStarPlanner(AStarPlanner(self.grid, self.clearance), block,
+                                             landmarks=0)
+        return self._graph
+
+    def to(self, goal) -> "CostToGo | None":
+        """The cost-to-go to ``goal`` (2,) [m], or None where no node lies within SNAP_REACH of
+        it (no free space the footprint fits there)."""
+        graph = self.graph
+        node = self.lookup(np.asarray(goal, dtype=np.float64).reshape(1, 2),
+                           np.zeros(graph.num_nodes))[0][0]
+        if node < 0:
+            return None
+        return CostToGo(self, graph._dijkstra(int(node)) * self.grid.resolution)
+
+    def lookup(self, xy: np.ndarray, dist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Points (K, 2) [m] and per-node costs (N,) [m] -> ((K,) node, (K,) cost [m]) of each
+        point's least-cost node (see the class docstring); node -1 and cost inf for none."""
+        graph, labels = self.graph, self.graph.labels
+        H, W = labels.shape
+        rows, cols = self.grid.world_to_cell(xy)
+        nodes = np.full(len(xy), -1, dtype=np.int64)
+        cost = np.full(len(xy), math.inf)
+        reach = int(math.ceil(SNAP_REACH / self.grid.resolution))
+        for i, (r, c) in enumerate(zip(rows.tolist(), cols.tolist())):
+            if 0 <= r < H and 0 <= c < W and labels[r, c] >= 0:
+                near = labels[r, c:c + 1]
+            else:
+                win = labels[max(0, r - reach):max(0, r + reach + 1),
+                             max(0, c - reach):max(0, c + reach + 1)]
+                near = np.unique(win[win >= 0])
+                if len(near) == 0:
+                    continue
+            total = dist[near] + np.linalg.norm(graph.rep_xy[near] - xy[i], axis=1)
+            j = int(np.argmin(total))
+            if math.isfinite(total[j]):
+                nodes[i], cost[i] = near[j], total[j]
+        return nodes, cost
+
+
+class CostToGo:
+    """Cost-to-go [m] to one goal (:meth:`GoalField.to`).
+
+    Call with points (K, 2) [m] -> (K,) [m], inf where a point has no node within SNAP_REACH or
+    its node cannot reach the goal."""
+
+    def __init__(self, field: GoalField, dist: np.ndarray) -> None:
+        self.field, self.dist = field, dist
+
+    def __call__(self, xy) -> np.ndarray:
+        return self.field.lookup(np.asarray(xy, dtype=np.float64).reshape(-1, 2), self.dist)[1]
+
+    def route(self, xy, reach: float) -> np.ndarray | None:
+        """The shortest route from ``xy`` (2,) [m] toward the goal over the coarse graph, as
+        its nodes' representatives (K, 2) [m], K >= 1, from ``xy``'s node until ``reach`` [m]
+        of route or the goal's node; None where ``xy`` has no node that reaches the goal."""
+        graph, res, dist = self.field.graph, self.field.grid.resolution, self.dist
+        xy = np.asarray(xy, dtype=np.float64).reshape(2)
+        node = int(self.field.lookup(xy[None], dist)[0][0])
+        if node < 0:
+            return None
+        indptr, dst, cost = graph._indptr, graph._dst, graph._cost
+        walked = float(np.linalg.norm(graph.rep_xy[node] - xy))
+        route = [node]
+        while walked < reach and dist[node] > 0 and indptr[node] < indptr[node + 1]:
+            # the neighbour the shortest route goes through (least cost to the goal via it)
+            j = min(range(indptr[node], indptr[node + 1]),
+                    key=lambda e: dist[dst[e]] + cost[e] * res)
+            if not dist[dst[j]] < dist[node]:
+                break
+            node, walked = dst[j], walked + cost[j] * res
+            route.append(node)
+        return graph.rep_xy[route].copy()

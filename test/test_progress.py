@@ -1,0 +1,102 @@
+"""The goal's cost-to-go (progress.GoalField) and the re-plan loop's subgoal rule (issue 10)."""
+import numpy as np
+import pytest
+import torch
+
+from ecahd_core.cost import CostConfig
+from ecahd_core.footprint import make_footprint
+from ecahd_core.maps import GridMap, builtin_map
+from ecahd_core.model_zoo import load_model
+from ecahd_core.placement import WaypointPlacer
+from ecahd_core.planner import (SUBGOAL_GAIN, HierarchicalPlanner, SparseConfig,
+                                SparseDiffusion, SparsePlan)
+from ecahd_core.progress import GoalField
+
+
+def gap_map():
+    """A 10 x 6 m room at 0.05 m/cell: a wall 0.3 m thick at y in [2.85, 3.15] from x = 0 to
+    x = 8, so the only way between the bottom half and the top half is the 2 m gap x in [8, 10];
+    and a closed 1 x 1 m box (walls 0.2 m) at x in [4, 5], y in [4.5, 5.5]."""
+    data = np.zeros((120, 200), dtype=np.int8)
+    data[57:63, :160] = 100
+    data[90:110, 80:100] = 100
+    data[94:106, 84:96] = 0  # the box's inside, closed all round
+    return GridMap(data, 0.05, (0.0, 0.0), name="gap")
+
+
+def test_cost_to_go_goes_round_the_wall_through_the_gap_and_its_route_heads_there():
+    grid, fp = gap_map(), make_footprint("circle")
+    field = GoalField(grid, fp)
+    goal, below = np.array([2.0, 4.5]), np.array([2.0, 1.5])
+    to_go = field.to(goal)
+    g = to_go(np.stack([goal, below, np.array([9.0, 3.0])]))
+    assert g[0] < 0.3  # the goal itself
+    # round the wall's end: about 7.2 m to the gap and 7.2 m back, far more than the 3 m across
+    detour = 2 * np.hypot(7.0, 1.5)
+    assert detour - 0.5 < g[1] < detour + 1.5
+    assert abs(g[2] - np.hypot(7.0, 1.5)) < 1.0  # from the gap
+    # a point without the clearance (beside the wall) snaps to free cells within reach; one
+    # deep in the wall, or in the closed box, has no cost-to-go
+    near, deep, boxed = np.array([2.0, 2.75]), np.array([12.0, 3.0]), np.array([4.5, 5.0])
+    g2 = to_go(np.stack([near, deep, boxed]))
+    assert np.isfinite(g2[0]) and g2[0] > g[1] - 1.0
+    assert np.isinf(g2[1]) and np.isinf(g2[2])
+    # the route from below heads for the gap (x grows), never across the wall, and its points
+    # come nearer the goal by the cost-to-go one after another
+    route = to_go.route(below, 4.0)
+    assert route.shape[1] == 2 and len(route) >= 3
+    assert route[-1][0] > below[0] + 3.0 and np.all(route[:, 1] < 2.85)
+    assert np.all(np.diff(to_go(route)) < 0)
+    assert np.linalg.norm(to_go.route(goal, 4.0)[-1] - goal) < 0.3  # at the goal: stays
+    assert to_go.route(boxed, 4.0) is None
+    # a goal with no free space round it has none
+    assert field.to(np.array([12.0, 3.0])) is None
+
+
+def test_the_subgoal_rule_replaces_a_first_leg_that_makes_no_progress_by_one_that_does():
+    """On maze2d-large, a re-plan whose first leg runs into a wall between the robot and the
+    goal: the rule has SD plan toward a point along the shortest route instead, whose first leg
+    is free and gains on the cost-to-go; a first leg that makes progress is left alone; off,
+    and without a replan spacing (the paper's setting), it never acts."""
+    grid, fp = builtin_map("maze2d-large"), make_footprint("circle")
+    cc = CostConfig()
+
+    def planner(**kw):
+        sd = SparseDiffusion(load_model("sd", grid, footprint=fp),
+                             SparseConfig(num_candidates=10),
+                             placer=WaypointPlacer(grid, fp, reach=1.0))
+        return HierarchicalPlanner(sd, load_model("dd", grid, footprint=fp),
+                                   costmap=cc.make_costmap(grid), footprint_points=fp.points,
+                                   cost_config=cc, **kw)
+
+    hd = planner(replan_spacing=3.0)
+    assert hd._subgoaling
+    assert not planner(replan_spacing=3.0, subgoals=False)._subgoaling
+    assert not planner()._subgoaling  # Algorithm 1's horizon: no extra iterations
+    # a start and a goal either side of a wall, the route round it much longer than straight
+    field = GoalField(grid, fp)
+    free = np.argwhere(field.graph.labels >= 0)
+    rng = np.random.default_rng(3)
+    S = G = None
+    for _ in range(500):
+        a, b = grid.cell_to_world(*free[rng.integers(len(free), size=2)].T)
+        if 1.5 < np.linalg.norm(b - a) < 3.0 and hd.sparse.placer.wall_length(a, b[None])[0] > 0:
+            to_go = field.to(b)
+            if to_go is not None and to_go(a[None])[0] > 3 * np.linalg.norm(b - a):
+                S, G = a, b
+                break
+    assert S is not None
+    straight = SparsePlan(waypoints=np.stack([S, G]), candidates=np.stack([S, G])[None],
+                          best=0, collision_costs=None, time_ms=0.0)
+    gen = torch.Generator().manual_seed(0)
+    times = {}
+    out = hd._toward_subgoal(S, G, straight, 20, times, gen)
+    assert out.first_leg == "subgoal" and "goal_field" in times
+    w = out.waypoints
+    assert np.allclose(w[0], S) and np.allclose(w[-1], G)
+    assert hd.sparse.placer.wall_length(w[0], w[1][None])[0] == 0
+    to_go = field.to(G)
+    assert to_go(w[1:2])[0] < to_go(S[None])[0] - SUBGOAL_GAIN
+    # a plan whose first leg already makes progress stays as it is
+    assert hd._toward_subgoal(S, G, out, 20, times, gen) is out
+
