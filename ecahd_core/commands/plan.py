@@ -296,4 +296,5 @@ def _plan_diffusion(args, grid, footprint, start, goal):
             dd_poses, plan.segments, hd, {"waypoints_placed": plan.placed,
                                           "exact_rule_segments": int(sum(plan.exact_kept)),
                                           "first_leg_changed": plan.first_leg_changed,
-                                          "backtracked": plan.backtracked})
+                                          "backtracked": plan.backtracked,
+                                          "subgoals": plan.subgoals})
