@@ -668,8 +668,9 @@ class HierarchicalPlanner:
             (:class:`~ecahd_core.progress.GoalField`, one coarse Dijkstra per goal) is drawn
             again by SD toward a subgoal: of the route's points within SUBGOAL_REACH x the
             replan spacing, the farthest a straight leg reaches free (that plan followed by the
-            goal), kept if its first leg is free and gains SUBGOAL_GAIN on the other's. SD still draws the waypoints and DD the local plans.
-            :attr:`HierarchicalPlan.subgoals` counts the iterations it changed.
+            goal), kept if its first leg is free and gains SUBGOAL_GAIN on the other's. SD still
+            draws the waypoints and DD the local plans. :attr:`HierarchicalPlan.subgoals`
+            counts the iterations it changed.
     """
 
     def __init__(self, sparse: SparseDiffusion, dense_checkpoint, *, costmap, footprint_points,
@@ -1049,7 +1050,7 @@ class HierarchicalPlanner:
             return sparse
         # the farthest point of the route a straight leg from S reaches (the route's end if
         # none does): SD then plans round the corner from there on
-        seen = np.flatnonzero(sd.placer.wall_length(np.broadcast_to(S, route.shape), route) == 0)
+        seen = np.flatnonzero(sd.placer.wall_length(S, route) == 0)
         sub = route[seen[-1] if len(seen) else -1]
         if np.linalg.norm(sub - S) < sd.placer.step:
             return sparse

@@ -48,9 +48,8 @@ class GoalField:
     def graph(self) -> CoarseAStarPlanner:
         """The coarse A* graph (built on first use)."""
         if self._graph is None:
-            block = max(1, int(round(COARSE_BLOCK_SIZE / self.grid.resolution)))
-            self._graph = CoarseAStarPlanner(AStarPlanner(self.grid, self.clearance), block,
-                                             landmarks=0)
+            self._graph = CoarseAStarPlanner.for_resolution(
+                AStarPlanner(self.grid, self.clearance), COARSE_BLOCK_SIZE, landmarks=0)
         return self._graph
 
     def to(self, goal) -> "CostToGo | None":

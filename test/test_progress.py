@@ -1,6 +1,5 @@
 """The goal's cost-to-go (progress.GoalField) and the re-plan loop's subgoal rule (issue 10)."""
 import numpy as np
-import pytest
 import torch
 
 from ecahd_core.cost import CostConfig
