@@ -218,12 +218,14 @@ class GlobalRunnerConfig:
 @dataclass(frozen=True)
 class PlanRequest:
     """Plan from ``start`` (2,) to ``goal`` (2,) [m] with ``horizon`` waypoints; ``reason`` is
-    "goal", "waypoint" or "timeout"."""
+    "goal", "waypoint" or "timeout" (or the local stage's, e.g. "blocked"); ``iteration`` is
+    Algorithm 1's p, the waypoints reached since the goal arrived."""
 
     start: np.ndarray
     goal: np.ndarray
     horizon: int
     reason: str
+    iteration: int = 0
 
 
 class GlobalRunner:
@@ -246,6 +248,8 @@ class GlobalRunner:
         self._forced: str | None = None  # a replan asked for by the local stage
         self.blocked_count = 0  # "blocked" replans asked for since the goal arrived
         self._hold = False  # the current goal's plan is followed to the end (a fallback)
+        self._settled = False  # the current plan is followed whole (the settle rule)
+        self._last_reached = -math.inf  # [s] when a settled plan's waypoint was last reached
         self.stalls = 0  # timeout replans since a waypoint was last reached
         self.stall_timeout = config.replan_timeout  # [s] the last timeout replan's wait
 
@@ -265,6 +269,7 @@ class GlobalRunner:
             raise PlanningError(f"goal is not finite: {g.tolist()}")
         self.goal, self.waypoints, self.iteration, self._pending = g, None, 0, True
         self._forced, self.blocked_count, self._hold, self.stalls = None, 0, False, 0
+        self._settled = False
 
     def cancel(self) -> None:
         self.goal, self.waypoints, self._pending, self._forced = None, None, False, None
@@ -285,8 +290,9 @@ class GlobalRunner:
         xy = np.asarray(xy, dtype=np.float64).reshape(2)
         if not np.all(np.isfinite(xy)):
             raise PlanningError(f"robot position is not finite: {xy.tolist()}")
-        if now < self._last_request or now < self._last_plan:  # the clock jumped back (a
-            self._last_request = self._last_plan = -math.inf  # restarted simulator)
+        if now < self._last_request or now < self._last_plan or now < self._last_reached:
+            # the clock jumped back (a restarted simulator)
+            self._last_request = self._last_plan = self._last_reached = -math.inf
         if self._pending:
             if now - self._last_request < c.min_plan_interval:
                 return None  # coalesce a burst of goals: the latest is planned next time
@@ -299,7 +305,7 @@ class GlobalRunner:
             return "reached"
         if self._forced is not None:
             reason, self._forced = self._forced, None
-            return PlanRequest(xy, self.goal.copy(), self._horizon(xy), reason)
+            return self._request(xy, reason)
         if c.replan == "once" or self._hold:
             return None
         nxt = self._next
@@ -307,22 +313,32 @@ class GlobalRunner:
                 float(np.linalg.norm(xy - self.waypoints[nxt])) < c.waypoint_tolerance:
             self.iteration += 1  # MoveAgent reached t^g_p[1]: replan with P^g - p
             self.stalls = 0
-            return PlanRequest(xy, self.goal.copy(), self._horizon(xy), "waypoint")
+            if self._settled:  # the settle rule: follow on to the next waypoint
+                self._next, self._last_reached = nxt + 1, now
+                return None
+            return self._request(xy, "waypoint")
         timeout = c.replan_timeout * 2 ** min(self.stalls, MAX_STALL_DOUBLINGS)
-        if c.replan_timeout > 0 and now - self._last_plan > timeout:
+        if c.replan_timeout > 0 and now - max(self._last_plan, self._last_reached) > timeout:
             self._last_plan = now  # one timeout replan per period even if planning fails
             self.stalls, self.stall_timeout = self.stalls + 1, timeout
-            return PlanRequest(xy, self.goal.copy(), self._horizon(xy), "timeout")
+            return self._request(xy, "timeout")
         return None
+
+    def _request(self, xy: np.ndarray, reason: str) -> PlanRequest:
+        """A re-plan from ``xy`` (2,) [m] now, for ``reason``."""
+        return PlanRequest(xy, self.goal.copy(), self._horizon(xy), reason, self.iteration)
 
     def _horizon(self, xy: np.ndarray) -> int:
         """The horizon of a re-plan from ``xy`` (2,) [m] now (:func:`replan_horizon`)."""
         c = self.config
         return replan_horizon(c.horizon, self.iteration, xy, self.goal, c.replan_spacing)
 
-    def accept(self, waypoints: np.ndarray, now: float, *, hold: bool = False) -> None:
+    def accept(self, waypoints: np.ndarray, now: float, *, hold: bool = False,
+               settled: bool = False) -> None:
         """The plan (P, 2) [m] made for the last request; ``hold``: follow it to the goal with
-        no waypoint or timeout replans (a fallback path round a blockage)."""
+        no waypoint or timeout replans (a fallback path round a blockage), for the rest of the
+        goal; ``settled``: follow this plan whole, no replan at its waypoints (the settle rule,
+        ``HierarchicalPlanner``'s ``settle``; timeout and local-stage replans still act)."""
         self.waypoints = np.asarray(waypoints, dtype=np.float64)
         # the waypoint to reach next: the first after the start that lies beyond
         # waypoint_tolerance of it. One the robot already stands at would count as reached at
@@ -336,6 +352,7 @@ class GlobalRunner:
         # goals that queued up while this plan was made are coalesced from its end on
         self._last_request = max(self._last_request, now)
         self._hold = self._hold or hold
+        self._settled = bool(settled)
 
     def fail(self) -> None:
         """Planning for the goal failed for good (an unreachable goal): drop it."""

@@ -28,14 +28,6 @@ LEG_REPAIRS = 2
 # iterations a backtracking round (HierarchicalPlanner's ``backtracks``) may try: each tries its
 # whole SD batch through placement, repair and one batch of local stages (hundreds of ms)
 BACKTRACK_TRIES = 4
-# the subgoal rule (HierarchicalPlanner's ``subgoals``): a re-plan beyond Algorithm 1's P^g - 1
-# iterations whose first leg is not free or brings the robot less than SUBGOAL_TRIGGER [m]
-# nearer the goal by its cost-to-go (progress.GoalField) plans toward the farthest point of the
-# shortest route within SUBGOAL_REACH x the replan spacing that a free straight leg reaches,
-# kept if its first leg is free and gains SUBGOAL_GAIN [m] on the other's
-SUBGOAL_TRIGGER = 0.5
-SUBGOAL_REACH = 1.0
-SUBGOAL_GAIN = 0.1
 SELECTION_RULES = ("shortest_reaching", "collision_aware")
 
 
@@ -536,6 +528,8 @@ class HierarchicalPlan:
             "subgoal" where the subgoal rule drew it toward a subgoal).
         backtracked: rounds in which backtracking (``HierarchicalPlanner``'s ``backtracks``)
             took another SD candidate.
+        settled: the iteration whose SD plan the settle rule (``HierarchicalPlanner``'s
+            ``settle``) followed whole, or None.
     """
 
     trajectory: np.ndarray
@@ -549,6 +543,7 @@ class HierarchicalPlan:
     exact_kept: list = field(default_factory=list)
     first_leg: list = field(default_factory=list)
     backtracked: int = 0
+    settled: int | None = None
 
     @property
     def dd_calls(self) -> int:
@@ -663,21 +658,25 @@ class HierarchicalPlanner:
         subgoals: the subgoal rule (ours; every_waypoint with a replan spacing and the
             SparseDiffusion's free-first-leg rule on: building maps). A re-plan beyond
             Algorithm 1's P^g - 1 iterations (the loop circling a wall with the goal behind it)
-            whose first leg is not free or brings the robot less than SUBGOAL_TRIGGER nearer
-            the goal by the goal's cost-to-go over the free space the footprint fits
-            (:class:`~ecahd_core.progress.GoalField`, one coarse Dijkstra per goal) is drawn
-            again by SD toward a subgoal: of the route's points within SUBGOAL_REACH x the
-            replan spacing, the farthest a straight leg reaches free (that plan followed by the
-            goal), kept if its first leg is free and gains SUBGOAL_GAIN on the other's. SD still
-            draws the waypoints and DD the local plans. :attr:`HierarchicalPlan.subgoals`
-            counts the iterations it changed.
+            whose first leg makes no progress by the goal's cost-to-go over the free space the
+            footprint fits is drawn again by SD toward a subgoal on the shortest route
+            (:class:`~ecahd_core.progress.SubgoalRule`). SD still draws the waypoints and DD
+            the local plans. :attr:`HierarchicalPlan.subgoals` counts the iterations it
+            changed.
+        settle: the settle rule (ours; every_waypoint with a replan spacing and the
+            free-first-leg rule on: building maps). An SD plan whose every straight leg is
+            free by the placer's leg test (``WaypointPlacer.leg_walls``, the test the
+            free-first-leg rule applies to the first leg) is followed whole, each leg an
+            iteration, instead of drawn again at each waypoint: a re-plan would only judge its
+            first leg by the same test. DD and the exact rule still make every local plan.
+            :attr:`HierarchicalPlan.settled` is the iteration whose plan was followed.
     """
 
     def __init__(self, sparse: SparseDiffusion, dense_checkpoint, *, costmap, footprint_points,
                  cost_config=None, dense: DenseConfig | None = None, device: str = "cpu",
                  replan: str = "every_waypoint", exact_check=None,
                  replan_spacing: float | None = None, backtracks: int = BACKTRACKS,
-                 subgoals: bool = True) -> None:
+                 subgoals: bool = True, settle: bool = True) -> None:
         if replan not in REPLAN_POLICIES:
             raise EcahdError(f"replan policy {replan!r} is not one of {list(REPLAN_POLICIES)}")
         if int(backtracks) != backtracks or backtracks < 0:
@@ -686,8 +685,8 @@ class HierarchicalPlanner:
         self.exact_check = exact_check
         self.backtracks = int(backtracks)
         self.subgoals = bool(subgoals)
-        self._goal_field = None  # progress.GoalField, built on the first subgoal check
-        self._to_go = None  # (goal, progress.CostToGo) of the last goal
+        self.settle = bool(settle)
+        self._subgoal_rule = None  # progress.SubgoalRule, built on the first subgoal check
         from ecahd_core.cost import CostConfig
         from ecahd_core.diffusion import DiffusionSampler, SamplerConfig
         from ecahd_core.model_zoo import DEFAULT_DENSE_POINTS, dense_points, sample_steps
@@ -936,7 +935,7 @@ class HierarchicalPlanner:
             return self._plan_once(S, G, generator, t_total)
         global_plans, first_leg = [], []
         sparse_plans: list = []  # per iteration its SD plan (None: a leg of a forced plan)
-        self._iterate(S, G, global_plans, first_leg, sparse_plans, times, generator)
+        settled = self._iterate(S, G, global_plans, first_leg, sparse_plans, times, generator)
         stages = self._joined_stages(global_plans, generator)
         backtracked = 0
         for _ in range(self.backtracks if self._backtracking else 0):
@@ -956,17 +955,20 @@ class HierarchicalPlanner:
                 break
             backtracked += 1
             del global_plans[q:], first_leg[q:], sparse_plans[q:]
+            if settled is not None and settled >= q:
+                settled = None
             global_plans.append(alt)
             first_leg.append("backtrack")
             sparse_plans.append(None)
             if len(alt) > 2:
-                self._iterate(torch.as_tensor(alt[1], dtype=torch.float32), G, global_plans,
-                              first_leg, sparse_plans, times, generator)
+                again = self._iterate(torch.as_tensor(alt[1], dtype=torch.float32), G,
+                                      global_plans, first_leg, sparse_plans, times, generator)
+                settled = settled if again is None else again
             stages = self._joined_stages(global_plans, generator)
         placed = sum(sp.placed for sp in sparse_plans if sp is not None)
         times.update(stages.timings_ms)
         result = self._result(global_plans, stages, times, t_total, placed, first_leg)
-        return replace(result, backtracked=backtracked)
+        return replace(result, backtracked=backtracked, settled=settled)
 
     @property
     def _backtracking(self) -> bool:
@@ -976,10 +978,11 @@ class HierarchicalPlanner:
                 and sp.placer is not None and sp.config.leg_batches >= 0)
 
     def _iterate(self, S: torch.Tensor, G: torch.Tensor, global_plans: list, first_leg: list,
-                 sparse_plans: list, times: dict, generator) -> None:
+                 sparse_plans: list, times: dict, generator) -> int | None:
         """Algorithm 1's SD calls (lines 2-12) from ``S`` (2,) to ``G`` (2,), appending each
         iteration's SD plan, first-leg note and SparsePlan to the lists, which hold the
-        iterations before (their count is the iteration index p)."""
+        iterations before (their count is the iteration index p). Returns the iteration whose
+        plan the settle rule followed whole, or None."""
         P_g = self.sparse.config.horizon
         p = len(global_plans)
         # Algorithm 1 line 1: P^g - 1 iterations, the last one reaching G. With waypoint spacing
@@ -988,7 +991,8 @@ class HierarchicalPlanner:
         # iterations go on until a plan is just (S, G), at most MAX_EXTRA_ITERATIONS more
         # (a robot circling a door it cannot take), after which the last SD plan is followed to
         # G whole: each of its legs is an iteration, all placed and repaired (ours; it was one
-        # straight leg to G, through every wall on the way).
+        # straight leg to G, through every wall on the way). A plan the settle rule accepts
+        # (every leg free by the leg test) is followed whole the same way.
         # MoveAgent takes the agent to the end of the local plan, t^g_p[1] (DD inpaints it), so
         # iteration p + 1's SD call needs only iteration p's SD plan: the SD calls run first,
         # then every iteration's local stage (lines 13-18) in one batch, as for replan "once":
@@ -1011,18 +1015,28 @@ class HierarchicalPlanner:
                                               generator)
             waypoints = sparse.waypoints
             times["sd"] += (time.perf_counter() - t0) * 1e3
-            if forced:  # the whole plan to G, one iteration per leg
+            settled = not forced and len(waypoints) > 2 and self._settled(waypoints)
+            if forced or settled:  # the whole plan to G, one iteration per leg
                 global_plans += [waypoints[q:] for q in range(len(waypoints) - 1)]
                 first_leg += [sparse.first_leg] + [""] * (len(waypoints) - 2)
                 sparse_plans += [sparse] + [None] * (len(waypoints) - 2)
-                return
+                return p if settled else None
             global_plans.append(waypoints)
             first_leg.append(sparse.first_leg)
             sparse_plans.append(sparse)
             S = torch.as_tensor(waypoints[1], dtype=torch.float32)  # MoveAgent
             p += 1
             if len(waypoints) == 2:
-                return
+                return None
+
+    def _settled(self, waypoints: np.ndarray) -> bool:
+        """The settle rule (see the class docstring): whether every straight leg of
+        ``waypoints`` (P, 2) [m] is free by the placer's leg test."""
+        sp = self.sparse
+        if not (self.settle and self.replan_spacing is not None and sp.placer is not None
+                and sp.config.leg_batches >= 0):
+            return False
+        return not sp.placer.leg_walls(waypoints).any()
 
     @property
     def _subgoaling(self) -> bool:
@@ -1033,49 +1047,17 @@ class HierarchicalPlanner:
 
     def _toward_subgoal(self, S: np.ndarray, G: np.ndarray, sparse: SparsePlan, p: int,
                         times: dict, generator) -> SparsePlan:
-        """The subgoal rule (see the class docstring) on ``sparse``, the SD plan of iteration
-        ``p`` from ``S`` (2,) [m] toward ``G`` (2,) [m]: it, or SD's plan toward the subgoal
-        followed by ``G`` (first_leg "subgoal"). The cost-to-go's time is added to
+        """The subgoal rule (:class:`~ecahd_core.progress.SubgoalRule`, built on the first
+        check for the placer's map and footprint) on ``sparse``, the SD plan of iteration
+        ``p`` from ``S`` (2,) [m] toward ``G`` (2,) [m]. The cost-to-go's time is added to
         ``times["goal_field"]`` [ms] (included in "sd")."""
-        to_go = self._cost_to_go(G, times)
-        if to_go is None:
-            return sparse
-        sd, wp = self.sparse, sparse.waypoints
-        g_start, g_next = to_go(wp[:2])
-        blocked = sd._leg_blocked(wp)
-        if not blocked and g_next <= g_start - SUBGOAL_TRIGGER:
-            return sparse
-        route = to_go.route(S, SUBGOAL_REACH * self.replan_spacing)
-        if route is None:
-            return sparse
-        # the farthest point of the route a straight leg from S reaches (the route's end if
-        # none does): SD then plans round the corner from there on
-        seen = np.flatnonzero(sd.placer.wall_length(S, route) == 0)
-        sub = route[seen[-1] if len(seen) else -1]
-        if np.linalg.norm(sub - S) < sd.placer.step:
-            return sparse
-        h = max(3, replan_horizon(sd.config.horizon, p, S, sub, self.replan_spacing))
-        alt = sd.plan(S, sub, horizon=h, generator=generator, repair_legs=1)
-        w = alt.waypoints
-        if sd._leg_blocked(w) or not (to_go(w[1:2])[0]
-                                      < (g_start if blocked else g_next) - SUBGOAL_GAIN):
-            return sparse
-        return replace(alt, waypoints=np.concatenate([w, G[None]]), first_leg="subgoal")
+        if self._subgoal_rule is None:
+            from ecahd_core.progress import SubgoalRule
 
-    def _cost_to_go(self, G: np.ndarray, times: dict):
-        """The goal field's cost-to-go to ``G`` (2,) [m] (None: the goal has no free space
-        round it), one Dijkstra per goal, kept for the last goal."""
-        key = tuple(np.asarray(G, dtype=np.float64).tolist())
-        if self._to_go is None or self._to_go[0] != key:
-            t0 = time.perf_counter()
-            if self._goal_field is None:
-                from ecahd_core.progress import GoalField
-
-                placer = self.sparse.placer
-                self._goal_field = GoalField(placer.grid, placer.footprint)
-            self._to_go = (key, self._goal_field.to(G))
-            times["goal_field"] = times.get("goal_field", 0.0) + (time.perf_counter() - t0) * 1e3
-        return self._to_go[1]
+            placer = self.sparse.placer
+            self._subgoal_rule = SubgoalRule(placer.grid, placer.footprint, self.replan_spacing)
+        return self._subgoal_rule.apply(self.sparse, S, G, sparse, p, generator=generator,
+                                        times=times)
 
     def _joined_stages(self, global_plans: list, generator) -> LocalStages:
         """Every iteration's local stage (lines 13-18) in one batch, polished as one path."""

@@ -1,6 +1,6 @@
-"""The goal's cost-to-go over the free space a footprint fits, for the re-plan loop's subgoal
-rule (ours, beyond the paper; :class:`~ecahd_core.planner.HierarchicalPlanner`'s
-``goal_field``).
+"""The goal's cost-to-go over the free space a footprint fits, and the re-plan loop's subgoal
+rule that uses it (ours, beyond the paper; :class:`SubgoalRule`, used by
+:class:`~ecahd_core.planner.HierarchicalPlanner` and the ``global_planner`` node).
 
 A re-plan loop (Algorithm 1 with a replan spacing) that has used its P^g - 1 iterations and is
 not at the goal is usually circling a wall with the goal behind it: SD's candidates all aim at
@@ -14,15 +14,26 @@ SD still draws every waypoint and DD every local plan.
 from __future__ import annotations
 
 import math
+import time
+from dataclasses import replace
 
 import numpy as np
 
 from ecahd_core.astar import (COARSE_BLOCK_SIZE, AStarPlanner, CoarseAStarPlanner,
                               clearance_for_footprint)
+from ecahd_core.navigation import replan_horizon
 
 # [m] how far round a point without the clearance (a waypoint beside a wall) its cost-to-go
 # looks for cells that have it
 SNAP_REACH = 0.5
+# the subgoal rule (SubgoalRule): a re-plan beyond Algorithm 1's P^g - 1 iterations whose first
+# leg is not free or brings the robot less than SUBGOAL_TRIGGER [m] nearer the goal by its
+# cost-to-go plans toward the farthest point of the shortest route within SUBGOAL_REACH x the
+# replan spacing that a free straight leg reaches, kept if its first leg is free and gains
+# SUBGOAL_GAIN [m] on the other's
+SUBGOAL_TRIGGER = 0.5
+SUBGOAL_REACH = 1.0
+SUBGOAL_GAIN = 0.1
 
 
 class GoalField:
@@ -120,3 +131,71 @@ class CostToGo:
             node, walked = dst[j], walked + cost[j] * res
             route.append(node)
         return graph.rep_xy[route].copy()
+
+
+class SubgoalRule:
+    """The subgoal rule (ours) on one map for one footprint.
+
+    A re-plan beyond Algorithm 1's P^g - 1 iterations (a loop circling a wall with the goal
+    behind it) whose first leg is not free or brings the robot less than SUBGOAL_TRIGGER nearer
+    the goal by the goal's cost-to-go (:class:`GoalField`, one coarse Dijkstra per goal, kept
+    for the last goal) is drawn again by SD toward a subgoal: of the shortest route's points
+    within SUBGOAL_REACH x ``spacing``, the farthest a straight leg reaches free; that plan,
+    followed by the goal, is kept if its first leg is free and gains SUBGOAL_GAIN on the
+    other's. SD still draws the waypoints.
+
+    Args:
+        grid: the GridMap the cost-to-go is computed on (the static map).
+        footprint: the robot's Footprint.
+        spacing: [m] the re-plan loop's replan spacing.
+    """
+
+    def __init__(self, grid, footprint, spacing: float) -> None:
+        self.field = GoalField(grid, footprint)
+        self.spacing = float(spacing)
+        self._to_go: tuple | None = None  # (goal, CostToGo) of the last goal
+
+    def cost_to_go(self, goal, times: dict | None = None) -> "CostToGo | None":
+        """The cost-to-go to ``goal`` (2,) [m] (None: no free space round it); its time [ms]
+        is added to ``times["goal_field"]`` when it had to be computed."""
+        key = tuple(np.asarray(goal, dtype=np.float64).tolist())
+        if self._to_go is None or self._to_go[0] != key:
+            t0 = time.perf_counter()
+            self._to_go = (key, self.field.to(goal))
+            if times is not None:
+                times["goal_field"] = (times.get("goal_field", 0.0)
+                                       + (time.perf_counter() - t0) * 1e3)
+        return self._to_go[1]
+
+    def apply(self, sd, start, goal, sparse, iteration: int, *, generator=None,
+              times: dict | None = None):
+        """The rule on ``sparse`` (a SparsePlan), the SD plan of re-plan ``iteration`` (p) from
+        ``start`` (2,) [m] toward ``goal`` (2,) [m] by ``sd`` (a SparseDiffusion with a
+        placer): ``sparse`` itself, or SD's plan toward the subgoal followed by ``goal``
+        (``first_leg`` "subgoal"). Callers apply it only past P^g - 1 iterations."""
+        S = np.asarray(start, dtype=np.float64).reshape(2)
+        G = np.asarray(goal, dtype=np.float64).reshape(2)
+        to_go = self.cost_to_go(G, times)
+        if to_go is None:
+            return sparse
+        wp = sparse.waypoints
+        g_start, g_next = to_go(wp[:2])
+        blocked = sd._leg_blocked(wp)
+        if not blocked and g_next <= g_start - SUBGOAL_TRIGGER:
+            return sparse
+        route = to_go.route(S, SUBGOAL_REACH * self.spacing)
+        if route is None:
+            return sparse
+        # the farthest point of the route a straight leg from S reaches (the route's end if
+        # none does): SD then plans round the corner from there on
+        seen = np.flatnonzero(sd.placer.wall_length(S, route) == 0)
+        sub = route[seen[-1] if len(seen) else -1]
+        if np.linalg.norm(sub - S) < sd.placer.step:
+            return sparse
+        h = max(3, replan_horizon(sd.config.horizon, iteration, S, sub, self.spacing))
+        alt = sd.plan(S, sub, horizon=h, generator=generator, repair_legs=1)
+        w = alt.waypoints
+        if sd._leg_blocked(w) or not (to_go(w[1:2])[0]
+                                      < (g_start if blocked else g_next) - SUBGOAL_GAIN):
+            return sparse
+        return replace(alt, waypoints=np.concatenate([w, G[None]]), first_leg="subgoal")

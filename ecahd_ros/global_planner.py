@@ -38,6 +38,14 @@ Parameters (read-only, declared in :data:`PARAMETERS`):
     waypoint_tolerance (double, 0.3): [m] distance to the next waypoint that triggers a replan
         (sd); distance to the goal that ends it (all methods).
     replan (str, "every_waypoint"): sd: Algorithm 1's replanning at each waypoint, or "once".
+    subgoals (bool, true), settle (bool, true): sd, every_waypoint, on maps where re-plans have
+        a replan spacing and the free-first-leg rule acts (building maps): the subgoal rule (a
+        re-plan past P^g - 1 waypoints whose first leg makes no progress by the goal's
+        cost-to-go over the static map plans toward a point on the shortest route; the
+        cost-to-go's graph is built when the map arrives) and the settle rule (a plan whose
+        every straight leg is free by the leg test on the map and the remembered obstacles is
+        followed whole: no re-plan at its waypoints; timeout and blocked re-plans still act).
+        As ``HierarchicalPlanner``'s ``subgoals`` and ``settle`` in ``ecahd bench planning``.
     replan_timeout (double, 5.0): [s] no waypoint reached for this long replans (sd); 0 = never.
         Doubles with each further such replan (at most 8x) until a waypoint is reached.
     warm_fraction (double, 0.0): sd, every_waypoint: the re-plan at a reached waypoint starts
@@ -151,6 +159,15 @@ PARAMETERS = [
                                       "map and model: on maps over 50 000 cells the SD "
                                       "model's expert waypoint spacing, at least 3.0, else "
                                       "off; 0 = off"),
+    ParamSpec("subgoals", True, "sd, every_waypoint, with a replan spacing and the free-first-"
+                                "leg rule on (building maps): a re-plan past P^g - 1 waypoints "
+                                "whose first leg makes no progress by the goal's cost-to-go "
+                                "plans toward a point on the shortest route (the subgoal rule, "
+                                "ecahd_core.progress.SubgoalRule)"),
+    ParamSpec("settle", True, "sd, every_waypoint, with a replan spacing and the free-first-leg "
+                              "rule on (building maps): a plan whose every straight leg is free "
+                              "by the leg test is followed whole, not re-planned at each "
+                              "waypoint (the settle rule)"),
     ParamSpec("replan_timeout", 5.0, "[s] sd: with no waypoint reached for this long, replan "
                                      "from the current pose (same horizon); doubles with each "
                                      "further such replan (at most 8x) until a waypoint is "
@@ -200,6 +217,8 @@ class GlobalPlannerParams:
     waypoint_tolerance: float
     replan: str
     replan_spacing: float
+    subgoals: bool
+    settle: bool
     replan_timeout: float
     warm_fraction: float
     obstacle_memory: float
@@ -324,6 +343,7 @@ class GlobalPlanner(Node):
         self.memory = None  # ecahd_core.sensing.ObstacleMemory of the scanned obstacles
         self._static_cost = None  # J's tuple on the static map (collision-aware selection)
         self._placer_cache = None  # (key of the fused grid, its WaypointPlacer)
+        self.subgoal_rule = None  # ecahd_core.progress.SubgoalRule on the static map
         self.fallbacks = 0  # A* fallbacks after repeated "blocked" replans
         # a goal coalesced in a burst is planned within one period even without odometry
         self.create_timer(p.runner_config().min_plan_interval, self._guard(self._on_pending))
@@ -390,8 +410,14 @@ class GlobalPlanner(Node):
         self.memory = ObstacleMemory(grid, p.obstacle_memory)
         self._static_cost = sparse.cost if sparse is not None else None
         self._placer_cache = None  # a new map: a new distance transform
-        ms = (time.perf_counter() - t0) * 1e3
         spacing = self.runner.config.replan_spacing
+        self.subgoal_rule = None
+        if self._rules_on() and p.subgoals:  # the cost-to-go's graph now, not on a re-plan
+            from ecahd_core.progress import SubgoalRule
+
+            self.subgoal_rule = SubgoalRule(grid, self.judged, spacing)
+            self.subgoal_rule.field.graph
+        ms = (time.perf_counter() - t0) * 1e3
         self.get_logger().info(f"map {grid.name!r} received ({grid.width} x {grid.height} "
                                f"cells); {p.method} planner built in {ms:.0f} ms{warm}"
                                + (f"; re-plans keep a waypoint per {spacing:g} m left to the "
@@ -488,6 +514,14 @@ class GlobalPlanner(Node):
         """What tells fused grids apart for the caches: None for the static map."""
         return None if grid is self.grid else grid.occupied.tobytes()
 
+    def _rules_on(self) -> bool:
+        """Whether the subgoal and settle rules can act: sd, every_waypoint, a replan spacing,
+        placement on and the free-first-leg rule on (as in ``HierarchicalPlanner``)."""
+        p = self.params
+        return (p.method == "sd" and p.replan == "every_waypoint" and self.grid is not None
+                and self.runner.config.replan_spacing is not None and self._placement_on()
+                and p.leg_batches >= 0 and p.warm_fraction == 0)
+
     def _placement_on(self) -> bool:
         """Whether place_reach (-1: by the map) moves waypoints farther than the goal snap."""
         from ecahd_core.placement import auto_reach
@@ -565,13 +599,21 @@ class GlobalPlanner(Node):
                 # a re-plan at a reached waypoint may start from the rest of the current plan
                 # (warm_fraction; from noise when 0, bit for bit)
                 previous = self.runner.waypoints if request.reason == "waypoint" else None
+                t0 = time.perf_counter()
                 result = self.sparse.replan(start, goal, previous, horizon=request.horizon,
                                             generator=self.generator,
                                             repair_legs=1 if first_leg else None)
+                if (self.subgoal_rule is not None
+                        and request.iteration >= self.params.horizon - 1):
+                    result = self.subgoal_rule.apply(self.sparse, start, goal, result,
+                                                     request.iteration,
+                                                     generator=self.generator)
+                    if result.first_leg == "subgoal":
+                        detail = " (toward a subgoal on the shortest route)"
             finally:
                 self.sparse.cost, self.sparse.placer = saved, None
-            waypoints, ms = result.waypoints.copy(), result.time_ms
-            detail = f" (candidate {result.best} of {len(result.candidates)})"
+            waypoints, ms = result.waypoints.copy(), (time.perf_counter() - t0) * 1e3
+            detail = detail or f" (candidate {result.best} of {len(result.candidates)})"
             if self._crosses_remembered(waypoints):  # SD cannot see round it: detour now
                 method, result = "fallback_astar", None
                 waypoints, ms_fallback = self._plan_fallback(start, goal)
@@ -588,8 +630,13 @@ class GlobalPlanner(Node):
             waypoints, moved = self._placer()(waypoints, last_reach=SNAP_DISTANCE)
             if moved:
                 detail += f", {moved} waypoint(s) moved out of or added round walls"
+        settled = (method == "sd" and len(waypoints) > 2 and self.params.settle
+                   and self._rules_on() and not self._placer().leg_walls(waypoints).any())
+        if settled:
+            detail += ", every leg free: followed whole (settle rule)"
         stamp = self.get_clock().now()
-        self.runner.accept(waypoints, stamp.nanoseconds * 1e-9, hold=method == "fallback_astar")
+        self.runner.accept(waypoints, stamp.nanoseconds * 1e-9, hold=method == "fallback_astar",
+                           settled=settled)
         self._plan_pub.publish(xy_to_path(waypoints, self.params.global_frame, stamp.to_msg()))
         if result is not None:
             self._cand_pub.publish(candidate_markers(result, self.params.global_frame,

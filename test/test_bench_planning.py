@@ -1,6 +1,7 @@
 """`ecahd bench planning --problems 4` with the shipped models: well-formed JSON and markdown."""
 import json
 
+import numpy as np
 import pytest
 
 from ecahd_core.errors import EcahdError
@@ -115,3 +116,23 @@ def test_replan_spacing_is_reported_per_robot_when_the_models_differ():
 
     assert _spacing_text(3.0) == "3 m"
     assert _spacing_text({"circle": 6.5, "quadruped": None}) == "robot (circle 6.5 m, quadruped off)"
+
+
+def test_per_problem_seeds_reseed_each_problem_and_report_each_problem():
+    from ecahd_core.bench.planning import (PlanningBenchSettings, format_markdown,
+                                           run_planning_benchmark)
+
+    def run(per_problem):
+        return run_planning_benchmark(PlanningBenchSettings(
+            problems=2, robots=("circle",), methods=("sd",), ablation=False, guidance="off",
+            per_problem_seeds=per_problem), progress=False)
+
+    stream, seeded = run(False), run(True)
+    a, b = stream.examples[("sd", False, "circle")], seeded.examples[("sd", False, "circle")]
+    np.testing.assert_array_equal(a[0], b[0])  # problem 0's seed: (0, 0) -> the stream's start
+    assert not np.array_equal(a[1], b[1])  # problem 1 sampled from its own seed
+    cell = seeded.cells[0]
+    assert len(cell.free_by_problem) == len(cell.time_ms_by_problem) == 2
+    assert 100 * np.mean(cell.free_by_problem) == cell.collision_free
+    assert "each problem its own" in format_markdown(seeded)
+    assert "each problem its own" not in format_markdown(stream)

@@ -436,3 +436,66 @@ def test_a_blockage_the_refiner_scanned_is_avoided_by_the_fallback(rig):
     path = path_to_xy(r.plans[-1])
     assert np.allclose(path[0], start) and np.allclose(path[-1], goal)
     assert np.abs(path[:, 1] - 5.5).max() > 1.0  # round the block through another corridor
+
+
+CORRIDOR = (6.5, 1.5)  # the foot of maze2d-large's longest straight corridor (6 m)
+
+
+def straight_goal(grid, placer, start, rng_seed=0):
+    """A free point 2.5-4 m from ``start`` (2,) [m] that a straight leg reaches by the leg test."""
+    free = np.argwhere(~grid.occupied)
+    rng = np.random.default_rng(rng_seed)
+    for _ in range(2000):
+        xy = grid.cell_to_world(*free[rng.integers(len(free))])
+        if 2.5 < np.linalg.norm(xy - start) < 4.0 and placer.wall_length(start, xy[None])[0] == 0:
+            return xy
+    raise AssertionError("no straight free leg from the start")
+
+
+@pytest.mark.parametrize("settle", [True, False])
+def test_a_plan_whose_legs_are_all_free_is_followed_whole_when_settle_is_on(rig, settle):
+    """The settle rule (replan spacing and placement on): a plan whose every straight leg is
+    free by the leg test is followed whole: reaching its next waypoint asks for no re-plan."""
+    from ecahd_core.planner import SparsePlan
+
+    r = rig(num_candidates=4, place_reach=1.0, replan_spacing=3.0, settle=settle)
+    ready(r)
+    start = np.array(CORRIDOR)
+    r.send_odom(start)
+    r.spin_until(lambda: np.allclose(r.planner.pose, start))
+    goal = straight_goal(r.planner.grid, r.planner._placer(), start)
+    wp = np.linspace(start, goal, 4)
+    r.planner.sparse.replan = lambda *a, **k: SparsePlan(
+        waypoints=wp.copy(), candidates=wp[None], best=0, collision_costs=None, time_ms=0.0)
+    r.send_goal(goal)
+    r.spin_until(lambda: r.plans)
+    np.testing.assert_allclose(path_to_xy(r.plans[-1]), wp, atol=1e-6)
+    r.send_odom(wp[1] + [0.05, 0.0])  # the next waypoint reached
+    if settle:
+        r.spin_for(0.5)
+        assert len(r.plans) == 1 and r.planner.runner.iteration == 1
+    else:
+        r.spin_until(lambda: len(r.plans) >= 2)
+
+
+def test_the_subgoal_rule_is_built_with_the_map_and_acts_past_p_g_minus_one_waypoints(rig):
+    from ecahd_core.navigation import PlanRequest
+
+    assert rig(num_candidates=4, place_reach=1.0, replan_spacing=0.0).planner.subgoal_rule \
+        is None  # before a map, and
+    off = rig(num_candidates=4, place_reach=1.0, replan_spacing=0.0)
+    ready(off)
+    assert off.planner.subgoal_rule is None  # without a replan spacing (the paper's setting)
+    r = rig(num_candidates=4, place_reach=1.0, replan_spacing=3.0, horizon=10)
+    ready(r)
+    rule = r.planner.subgoal_rule
+    assert rule is not None and rule.field._graph is not None  # its graph built with the map
+    seen = []
+    real = rule.apply
+    rule.apply = lambda sd, s, g, plan, it, **k: seen.append(it) or real(sd, s, g, plan, it, **k)
+    r.planner.runner.set_goal(GOAL)
+    for it in (8, 9, 12):
+        r.planner._plan(PlanRequest(np.array(ROBOT), np.array(GOAL), 10, "waypoint", it))
+    assert seen == [9, 12]
+    r.spin_until(lambda: r.plans)  # each published (the plan topic keeps the last)
+    assert r.planner.sparse.placer is None  # the fused placer only for the call

@@ -124,6 +124,31 @@ def test_timeout_replans_back_off_until_a_waypoint_is_reached():
     assert r.step((1.0, 0.3), 49.1).reason == "timeout"
 
 
+def test_a_settled_plan_is_followed_whole_and_still_replans_on_a_timeout_or_a_blockage():
+    # the settle rule: no re-plan at a settled plan's waypoints, but each one reached counts as
+    # progress (iteration and timeout); the next plan that is not settled re-plans again
+    r = GlobalRunner(GlobalRunnerConfig(horizon=4, replan_timeout=2.0))
+    r.set_goal((2.0, 1.0))
+    r.step((0.0, 0.0), 0.0)
+    r.accept(PLAN, 0.0, settled=True)
+    assert r.step((0.95, 0.0), 1.5) is None and r.iteration == 1  # waypoint 1: no re-plan
+    assert r.step((1.0, 0.5), 3.0) is None  # 1.5 s after waypoint 1: no timeout yet
+    assert r.step((1.0, 0.95), 3.2) is None and r.iteration == 2  # waypoint 2
+    req = r.step((1.05, 1.0), 5.3)  # stuck 2.1 s after waypoint 2: a timeout re-plan
+    assert req.reason == "timeout" and req.iteration == 2
+    rest = np.array([[1.05, 1.0], [1.5, 1.0], [2.0, 1.0]])
+    r.accept(rest, 5.3)  # not settled
+    r.request_replan("blocked")
+    assert r.step((1.05, 1.0), 5.4).reason == "blocked"
+    r.accept(rest, 5.4)
+    req = r.step((1.45, 1.0), 5.5)
+    assert req.reason == "waypoint" and req.iteration == 3
+    r.set_goal((0.0, 0.0))  # a new goal starts unsettled
+    r.step((2.0, 1.0), 6.0)
+    r.accept(PLAN[::-1].copy(), 6.0)
+    assert r.step((1.0, 1.0), 6.5).reason == "waypoint"
+
+
 def test_a_burst_of_goals_is_coalesced():
     r = GlobalRunner(GlobalRunnerConfig(min_plan_interval=0.05))
     requests = 0

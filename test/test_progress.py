@@ -1,4 +1,5 @@
-"""The goal's cost-to-go (progress.GoalField) and the re-plan loop's subgoal rule (issue 10)."""
+"""The goal's cost-to-go (progress.GoalField), and the re-plan loop's subgoal and settle rules
+(issue 10)."""
 import numpy as np
 import torch
 
@@ -7,9 +8,8 @@ from ecahd_core.footprint import make_footprint
 from ecahd_core.maps import GridMap, builtin_map
 from ecahd_core.model_zoo import load_model
 from ecahd_core.placement import WaypointPlacer
-from ecahd_core.planner import (SUBGOAL_GAIN, HierarchicalPlanner, SparseConfig,
-                                SparseDiffusion, SparsePlan)
-from ecahd_core.progress import GoalField
+from ecahd_core.planner import HierarchicalPlanner, SparseConfig, SparseDiffusion, SparsePlan
+from ecahd_core.progress import SUBGOAL_GAIN, GoalField
 
 
 def gap_map():
@@ -52,22 +52,24 @@ def test_cost_to_go_goes_round_the_wall_through_the_gap_and_its_route_heads_ther
     assert field.to(np.array([12.0, 3.0])) is None
 
 
+def maze_planner(**kw) -> HierarchicalPlanner:
+    """ECAHD on maze2d-large for the circle robot, with a placer (the rules' precondition)."""
+    grid, fp = builtin_map("maze2d-large"), make_footprint("circle")
+    cc = CostConfig()
+    sd = SparseDiffusion(load_model("sd", grid, footprint=fp), SparseConfig(num_candidates=10),
+                         placer=WaypointPlacer(grid, fp, reach=1.0))
+    return HierarchicalPlanner(sd, load_model("dd", grid, footprint=fp),
+                               costmap=cc.make_costmap(grid), footprint_points=fp.points,
+                               cost_config=cc, **kw)
+
+
 def test_the_subgoal_rule_replaces_a_first_leg_that_makes_no_progress_by_one_that_does():
     """On maze2d-large, a re-plan whose first leg runs into a wall between the robot and the
     goal: the rule has SD plan toward a point along the shortest route instead, whose first leg
     is free and gains on the cost-to-go; a first leg that makes progress is left alone; off,
     and without a replan spacing (the paper's setting), it never acts."""
     grid, fp = builtin_map("maze2d-large"), make_footprint("circle")
-    cc = CostConfig()
-
-    def planner(**kw):
-        sd = SparseDiffusion(load_model("sd", grid, footprint=fp),
-                             SparseConfig(num_candidates=10),
-                             placer=WaypointPlacer(grid, fp, reach=1.0))
-        return HierarchicalPlanner(sd, load_model("dd", grid, footprint=fp),
-                                   costmap=cc.make_costmap(grid), footprint_points=fp.points,
-                                   cost_config=cc, **kw)
-
+    planner = maze_planner
     hd = planner(replan_spacing=3.0)
     assert hd._subgoaling
     assert not planner(replan_spacing=3.0, subgoals=False)._subgoaling
@@ -99,3 +101,39 @@ def test_the_subgoal_rule_replaces_a_first_leg_that_makes_no_progress_by_one_tha
     # a plan whose first leg already makes progress stays as it is
     assert hd._toward_subgoal(S, G, out, 20, times, gen) is out
 
+
+
+def test_the_settle_rule_follows_a_plan_whose_legs_are_free_whole_and_only_then():
+    """With a replan spacing, an SD plan whose every straight leg is free by the leg test is
+    followed whole (one SD call for its legs); a plan with a leg near a wall is drawn again at
+    the next waypoint; off, and without a replan spacing, every waypoint is re-planned."""
+    from ecahd_core.problems import make_problems
+
+    grid = builtin_map("maze2d-large")
+    on, off = maze_planner(replan_spacing=3.0), maze_planner(replan_spacing=3.0, settle=False)
+    assert maze_planner().settle  # on by default, but it needs a replan spacing (the end)
+    calls = []
+    for hd in (on, off):
+        real = hd.sparse.replan
+        hd.sparse.replan = lambda *a, _r=real, **k: calls.append(hd) or _r(*a, **k)
+    seen = 0
+    for prob in make_problems(grid, 6, seed=5):
+        n0 = len(calls)
+        plan = on.plan(prob.start, prob.goal, generator=torch.Generator().manual_seed(0))
+        sd_calls = len(calls) - n0
+        if plan.settled is None:  # every plan drawn again had a leg near a wall
+            assert all(on.sparse.placer.leg_walls(w).any() for w in plan.global_plans
+                       if len(w) > 2)
+            continue
+        seen += 1
+        followed = plan.global_plans[plan.settled]
+        assert not on.sparse.placer.leg_walls(followed).any()
+        assert len(plan.global_plans) == plan.settled + len(followed) - 1
+        assert sd_calls <= plan.settled + 1 < len(plan.global_plans)
+        assert np.allclose(plan.trajectory[-1], prob.goal, atol=1e-4)
+        assert off.plan(prob.start, prob.goal,
+                        generator=torch.Generator().manual_seed(0)).settled is None
+    assert seen >= 2
+    assert maze_planner().plan(grid.cell_to_world(*np.argwhere(~grid.occupied)[0]),
+                               grid.cell_to_world(*np.argwhere(~grid.occupied)[-1]),
+                               generator=torch.Generator().manual_seed(0)).settled is None

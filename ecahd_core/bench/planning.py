@@ -76,6 +76,9 @@ class PlanningBenchSettings:
     problems: int = 128
     seed: int = 2026
     sample_seed: int = 0
+    # each problem's sampling from its own seed (sample_seed, problem index): a rule that changes
+    # how many samples one problem draws leaves the others' draws alone (paired comparisons)
+    per_problem_seeds: bool = False
     robots: tuple[str, ...] = ROBOTS
     methods: tuple[str, ...] = METHODS
     candidates: int = 10
@@ -97,6 +100,7 @@ class PlanningBenchSettings:
     leg_batches: int = LEG_BATCHES  # SparseConfig.leg_batches: a free first leg (-1: off)
     backtracks: int = BACKTRACKS  # HierarchicalPlanner's backtracking rounds (0: off)
     subgoals: bool = True  # HierarchicalPlanner's subgoal rule
+    settle: bool = True  # HierarchicalPlanner's settle rule
     ablation: bool = True
     guidance: str = "both"  # diffusion methods with and without guidance, or "on" / "off" only
     safety_net: bool = True  # ours: judge HD / ECAHD with and without the net (ecahd_core.safety)
@@ -128,6 +132,7 @@ class CellResult:
     first_leg_rate: float | None = None  # HD: % of plans where SD's free-first-leg rule acted
     backtrack_rate: float | None = None  # HD: % of plans where backtracking took a candidate
     subgoal_rate: float | None = None  # HD: % of plans where the subgoal rule drew a re-plan
+    settle_rate: float | None = None  # HD: % of plans where the settle rule followed an SD plan
     # the same paths through the safety net (HD cells when settings.safety_net; None otherwise)
     net_collision_free: float | None = None  # % after the net
     net_success_free: float | None = None
@@ -138,6 +143,10 @@ class CellResult:
     net_time_ms_mean: float | None = None  # planning + net
     net_time_ms_p95: float | None = None
     net_time_ms_median: float | None = None
+    # per problem, in order: collision-free by the exact checker (before the net), and the
+    # plan's time [ms], for paired comparisons of two runs on the same problems
+    free_by_problem: list = field(default_factory=list)
+    time_ms_by_problem: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -175,7 +184,15 @@ def _judge(paths, times, dd, problems, footprint, grid, *, method, guidance, rob
                       length_ratio=float(np.mean(ratio)),
                       time_ms_mean=float(np.mean(times)), time_ms_median=float(np.median(times)),
                       time_ms_p95=float(np.percentile(times, 95)),
-                      dd_ratio=float(np.mean(dd)) if dd else 0.0, problems=len(problems))
+                      dd_ratio=float(np.mean(dd)) if dd else 0.0, problems=len(problems),
+                      free_by_problem=[bool(f) for f in free],
+                      time_ms_by_problem=[round(float(t), 2) for t in times])
+
+
+def problem_seed(seed: int, index: int) -> int:
+    """The sampling seed of problem ``index`` under ``per_problem_seeds`` (one 63-bit number per
+    (seed, index) pair)."""
+    return (int(seed) * 1_000_003 + int(index)) % (2 ** 63)
 
 
 def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = True
@@ -254,6 +271,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                                          replan_spacing=spacings[robot],
                                          backtracks=settings.backtracks,
                                          subgoals=settings.subgoals,
+                                         settle=settings.settle,
                                          exact_check=(exact_check_for(grid, fp)
                                                       if settings.exact_rule and not variant
                                                       else None))
@@ -270,10 +288,14 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                         retries=settings.net_retries, resamples=settings.net_resamples),
                                     planner=hd, astar=astar_for(robot, fp))
                     net_gen = torch.Generator().manual_seed(settings.sample_seed + 1)
-        paths, times, dd, kept, switched, backtracked, subgoaled = [], [], [], [], [], [], []
+        paths, times, dd, kept, switched, backtracked, subgoaled, settled = ([] for _ in range(8))
         net_paths, net_times, net_rules = [], [], []
         label = f"{METHOD_LABELS[method]}{' guided' if guidance else ''} {robot} {variant}".strip()
-        for prob in tqdm(problems, desc=label, disable=not progress, leave=False):
+        for k, prob in enumerate(tqdm(problems, desc=label, disable=not progress, leave=False)):
+            if settings.per_problem_seeds:
+                gen.manual_seed(problem_seed(settings.sample_seed, k))
+                if net is not None:
+                    net_gen.manual_seed(problem_seed(settings.sample_seed + 1, k))
             t0 = time.perf_counter()
             path, dd_segs = plan_fn(prob.start, prob.goal)
             times.append((time.perf_counter() - t0) * 1e3)
@@ -284,6 +306,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                 switched.append(last[0].first_leg_changed)
                 backtracked.append(last[0].backtracked > 0)
                 subgoaled.append(last[0].subgoals > 0)
+                settled.append(last[0].settled is not None)
             if net is not None:  # the same path through the net, timed on its own
                 safe = net.apply(paths[-1], segments=last[0].segments, generator=net_gen)
                 net_paths.append(safe.path)
@@ -296,6 +319,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
             cell.first_leg_rate = 100 * float(np.mean(switched))
             cell.backtrack_rate = 100 * float(np.mean(backtracked))
             cell.subgoal_rate = 100 * float(np.mean(subgoaled))
+            cell.settle_rate = 100 * float(np.mean(settled))
         if net is not None:
             after = _judge(net_paths, net_times, dd, problems, fp, grid, method=method,
                            guidance=guidance, robot=robot)
@@ -331,6 +355,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
     context = {"map": grid.name, "map_source": settings.map, "problems": len(problems),
                "seed": settings.seed,
                "sample_seed": settings.sample_seed, "candidates": settings.candidates,
+               "per_problem_seeds": settings.per_problem_seeds,
                "selection": settings.selection,
                "guidance_weight": settings.guidance_weight, "c_th": settings.c_th,
                "dd_guidance_weight": guidance_weight_for(settings.guidance_weight, margin),
@@ -339,6 +364,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                "keep_better": settings.keep_better, "exact_rule": settings.exact_rule,
                "leg_batches": settings.leg_batches, "backtracks": settings.backtracks,
                "subgoals": settings.subgoals,
+               "settle": settings.settle,
                "replan": settings.replan, "warm_fraction": settings.warm_fraction,
                # one number when every robot's model asked for the same, else per robot
                "replan_spacing": (next(iter(spacings.values()))
@@ -376,7 +402,9 @@ def format_markdown(r: PlanningBenchResult) -> str:
     head = " | ".join(f"{METHOD_LABELS[m]} {'✓' if g else '×'}" + (" (ECAHD)" if (m, g) == ("hd", True) else "")
                       for m, g in cols)
     lines = [f"Planning on {c['map']}: {c['problems']} held-out problems (seed {c['seed']}), "
-             f"sampling seed {c['sample_seed']}, best of {c['candidates']} SD candidates "
+             f"sampling seed {c['sample_seed']}"
+             + (" (each problem its own: (seed, index))" if c.get("per_problem_seeds") else "")
+             + f", best of {c['candidates']} SD candidates "
              f"({c.get('selection', 'shortest_reaching')}), "
              f"omega {c['guidance_weight']} ({c['guidance_space']} space"
              + (f"; DD's x 0.1 m / margin = {c['dd_guidance_weight']:g}"
@@ -403,6 +431,9 @@ def format_markdown(r: PlanningBenchResult) -> str:
              + (", a re-plan loop past P^g - 1 iterations that makes no progress by the goal's "
                 "cost-to-go plans toward a point along the shortest route"
                 if leg_rule and c.get("subgoals") and c.get("replan_spacing")
+                and c["replan"] == "every_waypoint" else "")
+             + (", an SD plan whose every leg is free by the leg test is followed whole"
+                if leg_rule and c.get("settle", False) and c.get("replan_spacing")
                 and c["replan"] == "every_waypoint" else "")
              + ", "
              f"torch {c['torch']} with {c['threads']} thread(s). Each cell: ours / paper"
@@ -457,11 +488,13 @@ def format_markdown(r: PlanningBenchResult) -> str:
                   "plans where a re-plan loop past P^g - 1 iterations drew SD toward a point "
                   "along the shortest route because its plan's first leg made no progress by the "
                   "goal's cost-to-go (HierarchicalPlanner's subgoals; SD draws the waypoints; "
-                  "counted in ECAHD alone).", "",
+                  "counted in ECAHD alone). Settle: share of plans where an SD plan whose every "
+                  "leg was free by the leg test was followed whole instead of drawn again at "
+                  "each waypoint (HierarchicalPlanner's settle; counted in ECAHD alone).", "",
                   "| method | guidance | robot | collision-free % | success & free % | exact rule % "
-                  "| first leg % | backtrack % | subgoal % | retry % | resample % | fallback % | "
-                  "unsafe % | time mean ms | time median ms | time p95 ms |",
-                  "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+                  "| first leg % | backtrack % | subgoal % | settle % | retry % | resample % | "
+                  "fallback % | unsafe % | time mean ms | time median ms | time p95 ms |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for x in netted:
             lines.append(
                 f"| {METHOD_LABELS[x.method]}{' (ECAHD)' if x.guidance else ''} | "
@@ -472,6 +505,7 @@ def format_markdown(r: PlanningBenchResult) -> str:
                 f"{'–' if x.first_leg_rate is None else f'{x.first_leg_rate:.1f}'} | "
                 f"{'–' if x.backtrack_rate is None else f'{x.backtrack_rate:.1f}'} | "
                 f"{'–' if x.subgoal_rate is None else f'{x.subgoal_rate:.1f}'} | "
+                f"{'–' if x.settle_rate is None else f'{x.settle_rate:.1f}'} | "
                 f"{x.net_retry_rate:.1f} | "
                 f"{'–' if x.net_resample_rate is None else f'{x.net_resample_rate:.1f}'} | "
                 f"{x.net_fallback_rate:.1f} | {x.net_unsafe_rate:.1f} | "

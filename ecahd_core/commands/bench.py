@@ -181,6 +181,10 @@ def _add_planning_arguments(parser: argparse.ArgumentParser) -> None:
                         help="held-out start/goal pairs (>= 3 m apart along the A* path)")
     parser.add_argument("--seed", type=int, default=d.seed, help="seed of the problems")
     parser.add_argument("--sample-seed", type=int, default=d.sample_seed, help="sampling seed")
+    parser.add_argument("--per-problem-seeds", action="store_true",
+                        help="seed each problem's sampling by (sample seed, problem index), so a "
+                             "rule that changes how much one problem samples leaves the other "
+                             "problems' draws alone (paired comparisons of two settings)")
     parser.add_argument("--robots", nargs="+", default=list(d.robots), choices=ROBOTS)
     parser.add_argument("--methods", nargs="+", default=list(d.methods), choices=METHODS)
     parser.add_argument("--candidates", type=_int_at_least(1), default=d.candidates,
@@ -237,6 +241,10 @@ def _add_planning_arguments(parser: argparse.ArgumentParser) -> None:
                              "(a re-plan loop past P^g - 1 iterations whose plan makes no "
                              "progress by the goal's cost-to-go plans toward a point along the "
                              "shortest route; ours)")
+    parser.add_argument("--no-settle", action="store_true",
+                        help="HD, every_waypoint, on building maps: turn off the settle rule "
+                             "(an SD plan whose every straight leg is free by the leg test is "
+                             "followed whole instead of re-planned at each waypoint; ours)")
     parser.add_argument("--guidance", choices=tuple(GUIDANCE_RUNS), default=d.guidance,
                         help="run the diffusion methods with and without J's guidance, or only "
                              "one of the two (on: ECAHD's own setting)")
@@ -253,6 +261,7 @@ def _run_planning(args: argparse.Namespace) -> int:
 
     settings = PlanningBenchSettings(
         map=args.map, problems=args.problems, seed=args.seed, sample_seed=args.sample_seed,
+        per_problem_seeds=args.per_problem_seeds,
         robots=tuple(args.robots), methods=tuple(args.methods), candidates=args.candidates,
         selection=args.selection,
         guidance_weight=args.omega, guidance_space=args.guidance_space, margin=args.margin,
@@ -262,7 +271,7 @@ def _run_planning(args: argparse.Namespace) -> int:
         place_reach=args.place_reach, ablation=not args.no_ablation, precision=args.precision,
         net_resamples=args.net_resamples, replan_spacing=args.replan_spacing,
         guidance=args.guidance, leg_batches=args.leg_batches, backtracks=args.backtracks,
-        subgoals=not args.no_subgoals)
+        subgoals=not args.no_subgoals, settle=not args.no_settle)
     result = run_planning_benchmark(settings, progress=not args.no_progress)
     md = format_markdown(result)
     print(md)

@@ -297,4 +297,5 @@ def _plan_diffusion(args, grid, footprint, start, goal):
                                           "exact_rule_segments": int(sum(plan.exact_kept)),
                                           "first_leg_changed": plan.first_leg_changed,
                                           "backtracked": plan.backtracked,
-                                          "subgoals": plan.subgoals})
+                                          "subgoals": plan.subgoals,
+                                          "settled": plan.settled})
