@@ -669,7 +669,11 @@ class HierarchicalPlanner:
             free-first-leg rule applies to the first leg) is followed whole, each leg an
             iteration, instead of drawn again at each waypoint: a re-plan would only judge its
             first leg by the same test. DD and the exact rule still make every local plan.
-            :attr:`HierarchicalPlan.settled` is the iteration whose plan was followed.
+            With backtracking on, a leg of that plan (after its first) whose local plan the
+            exact checker still finds in collision (the leg test judges the footprint by
+            circles) is cut there, and from its start the iterations re-plan at each waypoint
+            as without the rule (a backtracking round). :attr:`HierarchicalPlan.settled` is
+            the iteration whose plan was followed (None after such a cut).
     """
 
     def __init__(self, sparse: SparseDiffusion, dense_checkpoint, *, costmap, footprint_points,
@@ -951,6 +955,20 @@ class HierarchicalPlanner:
                     q = j
                     break
             times["backtrack"] = times.get("backtrack", 0.0) + (time.perf_counter() - t0) * 1e3
+            if alt is None and settled is not None:
+                # a colliding leg of the plan the settle rule followed, after its first (the
+                # leg test passed it, judging the footprint by circles): from that leg's start
+                # the iterations re-plan at each waypoint, as without the rule
+                inside = [i for i, b in enumerate(bad) if b and i > settled]
+                if inside:
+                    q = inside[0]
+                    del global_plans[q:], first_leg[q:], sparse_plans[q:]
+                    settled, backtracked = None, backtracked + 1
+                    self._iterate(torch.as_tensor(global_plans[-1][1], dtype=torch.float32), G,
+                                  global_plans, first_leg, sparse_plans, times, generator,
+                                  settle=False)
+                    stages = self._joined_stages(global_plans, generator)
+                    continue
             if alt is None:
                 break
             backtracked += 1
@@ -978,11 +996,12 @@ class HierarchicalPlanner:
                 and sp.placer is not None and sp.config.leg_batches >= 0)
 
     def _iterate(self, S: torch.Tensor, G: torch.Tensor, global_plans: list, first_leg: list,
-                 sparse_plans: list, times: dict, generator) -> int | None:
+                 sparse_plans: list, times: dict, generator, *, settle: bool = True
+                 ) -> int | None:
         """Algorithm 1's SD calls (lines 2-12) from ``S`` (2,) to ``G`` (2,), appending each
         iteration's SD plan, first-leg note and SparsePlan to the lists, which hold the
         iterations before (their count is the iteration index p). Returns the iteration whose
-        plan the settle rule followed whole, or None."""
+        plan the settle rule followed whole, or None (always with ``settle`` False)."""
         P_g = self.sparse.config.horizon
         p = len(global_plans)
         # Algorithm 1 line 1: P^g - 1 iterations, the last one reaching G. With waypoint spacing
@@ -1015,7 +1034,8 @@ class HierarchicalPlanner:
                                               generator)
             waypoints = sparse.waypoints
             times["sd"] += (time.perf_counter() - t0) * 1e3
-            settled = not forced and len(waypoints) > 2 and self._settled(waypoints)
+            settled = (settle and not forced and len(waypoints) > 2
+                       and self._settled(waypoints))
             if forced or settled:  # the whole plan to G, one iteration per leg
                 global_plans += [waypoints[q:] for q in range(len(waypoints) - 1)]
                 first_leg += [sparse.first_leg] + [""] * (len(waypoints) - 2)

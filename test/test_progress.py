@@ -137,3 +137,39 @@ def test_the_settle_rule_follows_a_plan_whose_legs_are_free_whole_and_only_then(
     assert maze_planner().plan(grid.cell_to_world(*np.argwhere(~grid.occupied)[0]),
                                grid.cell_to_world(*np.argwhere(~grid.occupied)[-1]),
                                generator=torch.Generator().manual_seed(0)).settled is None
+
+
+def test_a_colliding_leg_of_a_settled_plan_is_cut_and_re_planned_from_its_start():
+    """Backtracking: when the exact checker finds a leg of the followed plan (after its first)
+    still in collision, the iterations from that leg's start re-plan at each waypoint."""
+    from ecahd_core.collision import exact_check_for
+    from ecahd_core.problems import make_problems
+
+    grid, fp = builtin_map("maze2d-large"), make_footprint("circle")
+    hd = maze_planner(replan_spacing=3.0, exact_check=exact_check_for(grid, fp))
+    assert hd._backtracking
+    real = hd._colliding
+    for prob in make_problems(grid, 6, seed=5):
+        first = hd.plan(prob.start, prob.goal, generator=torch.Generator().manual_seed(0))
+        if first.settled is not None and len(first.global_plans) > first.settled + 3:
+            break
+    else:
+        raise AssertionError("no settled plan of 4 legs or more")
+    cut = first.settled + 2  # neither it nor the leg before it has SD candidates to take
+    leg = torch.as_tensor(first.global_plans[cut][:2], dtype=torch.float32)
+
+    def colliding(plans, joined):  # the followed plan's leg `cut` collides wherever it is
+        out = real(plans, joined)
+        if len(plans) > cut and torch.allclose(plans[cut, [0, -1]], leg, atol=0.3):
+            out = out.clone()
+            out[cut] = True
+        return out
+
+    hd._colliding = colliding
+    plan = hd.plan(prob.start, prob.goal, generator=torch.Generator().manual_seed(0))
+    # cut at `cut` (re-planned at each waypoint from there; a later round may settle again)
+    assert plan.backtracked >= 1 and (plan.settled is None or plan.settled >= cut)
+    assert plan.backtracked > plan.first_leg.count("backtrack")  # a round took no candidate
+    assert np.allclose(plan.global_plans[cut - 1], first.global_plans[cut - 1])  # kept
+    assert np.allclose(plan.global_plans[cut][0], first.global_plans[cut][0])  # from its start
+    assert np.allclose(plan.trajectory[-1], prob.goal, atol=1e-4)
