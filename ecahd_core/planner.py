@@ -1041,11 +1041,15 @@ class HierarchicalPlanner:
                 first_leg += [sparse.first_leg] + [""] * (len(waypoints) - 2)
                 sparse_plans += [sparse] + [None] * (len(waypoints) - 2)
                 return p if settled else None
-            global_plans.append(waypoints)
-            first_leg.append(sparse.first_leg)
-            sparse_plans.append(sparse)
-            S = torch.as_tensor(waypoints[1], dtype=torch.float32)  # MoveAgent
-            p += 1
+            # a plan toward a subgoal whose legs up to the subgoal are all free: followed to
+            # the subgoal (the settle rule's test; its last leg, to G, is left to the re-plans)
+            legs = (len(waypoints) - 2 if settle and sparse.first_leg == "subgoal"
+                    and self._settled(waypoints[:-1]) else 1)
+            global_plans += [waypoints[q:] for q in range(legs)]
+            first_leg += [sparse.first_leg] + [""] * (legs - 1)
+            sparse_plans += [sparse] + [None] * (legs - 1)
+            S = torch.as_tensor(waypoints[legs], dtype=torch.float32)  # MoveAgent
+            p += legs
             if len(waypoints) == 2:
                 return None
 
