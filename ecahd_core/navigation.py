@@ -248,8 +248,8 @@ class GlobalRunner:
         self._forced: str | None = None  # a replan asked for by the local stage
         self.blocked_count = 0  # "blocked" replans asked for since the goal arrived
         self._hold = False  # the current goal's plan is followed to the end (a fallback)
-        self._settled = False  # the current plan is followed whole (the settle rule)
-        self._last_reached = -math.inf  # [s] when a settled plan's waypoint was last reached
+        self._follow_to = 1  # index of the waypoint whose reach asks for a re-plan (settle)
+        self._last_reached = -math.inf  # [s] when a followed-past waypoint was last reached
         self.stalls = 0  # timeout replans since a waypoint was last reached
         self.stall_timeout = config.replan_timeout  # [s] the last timeout replan's wait
 
@@ -269,7 +269,7 @@ class GlobalRunner:
             raise PlanningError(f"goal is not finite: {g.tolist()}")
         self.goal, self.waypoints, self.iteration, self._pending = g, None, 0, True
         self._forced, self.blocked_count, self._hold, self.stalls = None, 0, False, 0
-        self._settled = False
+        self._follow_to = 1
 
     def cancel(self) -> None:
         self.goal, self.waypoints, self._pending, self._forced = None, None, False, None
@@ -313,7 +313,7 @@ class GlobalRunner:
                 float(np.linalg.norm(xy - self.waypoints[nxt])) < c.waypoint_tolerance:
             self.iteration += 1  # MoveAgent reached t^g_p[1]: replan with P^g - p
             self.stalls = 0
-            if self._settled:  # the settle rule: follow on to the next waypoint
+            if nxt < self._follow_to:  # the settle rule: follow on to the next waypoint
                 self._next, self._last_reached = nxt + 1, now
                 return None
             return self._request(xy, "waypoint")
@@ -334,11 +334,12 @@ class GlobalRunner:
         return replan_horizon(c.horizon, self.iteration, xy, self.goal, c.replan_spacing)
 
     def accept(self, waypoints: np.ndarray, now: float, *, hold: bool = False,
-               settled: bool = False) -> None:
+               follow: int = 1) -> None:
         """The plan (P, 2) [m] made for the last request; ``hold``: follow it to the goal with
         no waypoint or timeout replans (a fallback path round a blockage), for the rest of the
-        goal; ``settled``: follow this plan whole, no replan at its waypoints (the settle rule,
-        ``HierarchicalPlanner``'s ``settle``; timeout and local-stage replans still act)."""
+        goal; ``follow``: the waypoint whose reach asks for the next re-plan, those before it
+        are passed without one (the settle rule, ``HierarchicalPlanner``'s ``settle``: P - 1
+        follows the whole plan; timeout and local-stage replans still act; 1: Algorithm 1)."""
         self.waypoints = np.asarray(waypoints, dtype=np.float64)
         # the waypoint to reach next: the first after the start that lies beyond
         # waypoint_tolerance of it. One the robot already stands at would count as reached at
@@ -352,7 +353,7 @@ class GlobalRunner:
         # goals that queued up while this plan was made are coalesced from its end on
         self._last_request = max(self._last_request, now)
         self._hold = self._hold or hold
-        self._settled = bool(settled)
+        self._follow_to = int(follow)
 
     def fail(self) -> None:
         """Planning for the goal failed for good (an unreachable goal): drop it."""

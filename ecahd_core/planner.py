@@ -668,8 +668,10 @@ class HierarchicalPlanner:
             free by the placer's leg test (``WaypointPlacer.leg_walls``, the test the
             free-first-leg rule applies to the first leg) is followed whole, each leg an
             iteration, instead of drawn again at each waypoint: a re-plan would only judge its
-            first leg by the same test. DD and the exact rule still make every local plan.
-            With backtracking on, a leg of that plan (after its first) whose local plan the
+            first leg by the same test; a plan toward a subgoal (``subgoals``) whose legs up to
+            the subgoal are all free is followed to the subgoal the same way (the re-plans then
+            start there). DD and the exact rule still make every local plan. With backtracking
+            on, a leg of that plan (after its first) whose local plan the
             exact checker still finds in collision (the leg test judges the footprint by
             circles) is cut there, and from its start the iterations re-plan at each waypoint
             as without the rule (a backtracking round). :attr:`HierarchicalPlan.settled` is

@@ -44,7 +44,8 @@ Parameters (read-only, declared in :data:`PARAMETERS`):
         cost-to-go over the static map plans toward a point on the shortest route; the
         cost-to-go's graph is built when the map arrives) and the settle rule (a plan whose
         every straight leg is free by the leg test on the map and the remembered obstacles is
-        followed whole: no re-plan at its waypoints; timeout and blocked re-plans still act).
+        followed whole: no re-plan at its waypoints; a plan toward a subgoal whose legs up to
+        the subgoal are free, to the subgoal; timeout and blocked re-plans still act).
         As ``HierarchicalPlanner``'s ``subgoals`` and ``settle`` in ``ecahd bench planning``.
     replan_timeout (double, 5.0): [s] no waypoint reached for this long replans (sd); 0 = never.
         Doubles with each further such replan (at most 8x) until a waypoint is reached.
@@ -167,7 +168,8 @@ PARAMETERS = [
     ParamSpec("settle", True, "sd, every_waypoint, with a replan spacing and the free-first-leg "
                               "rule on (building maps): a plan whose every straight leg is free "
                               "by the leg test is followed whole, not re-planned at each "
-                              "waypoint (the settle rule)"),
+                              "waypoint, and a plan toward a subgoal whose legs up to it are "
+                              "free is followed to the subgoal (the settle rule)"),
     ParamSpec("replan_timeout", 5.0, "[s] sd: with no waypoint reached for this long, replan "
                                      "from the current pose (same horizon); doubles with each "
                                      "further such replan (at most 8x) until a waypoint is "
@@ -630,13 +632,14 @@ class GlobalPlanner(Node):
             waypoints, moved = self._placer()(waypoints, last_reach=SNAP_DISTANCE)
             if moved:
                 detail += f", {moved} waypoint(s) moved out of or added round walls"
-        settled = (method == "sd" and len(waypoints) > 2 and self.params.settle
-                   and self._rules_on() and not self._placer().leg_walls(waypoints).any())
-        if settled:
+        follow = self._follow(waypoints, result) if method == "sd" else 1
+        if follow == len(waypoints) - 1 > 1:
             detail += ", every leg free: followed whole (settle rule)"
+        elif follow > 1:
+            detail += f", legs free up to the subgoal: followed to waypoint {follow} (settle rule)"
         stamp = self.get_clock().now()
         self.runner.accept(waypoints, stamp.nanoseconds * 1e-9, hold=method == "fallback_astar",
-                           settled=settled)
+                           follow=follow)
         self._plan_pub.publish(xy_to_path(waypoints, self.params.global_frame, stamp.to_msg()))
         if result is not None:
             self._cand_pub.publish(candidate_markers(result, self.params.global_frame,
@@ -645,6 +648,23 @@ class GlobalPlanner(Node):
                                                 horizon=len(waypoints)))
         self.get_logger().info(f"{method} plan of {len(waypoints)} points to "
                                f"({goal[0]:.2f}, {goal[1]:.2f}) in {ms:.1f} ms{detail}")
+
+    def _follow(self, waypoints: np.ndarray, result: SparsePlan) -> int:
+        """The settle rule (``settle``, as ``HierarchicalPlanner``'s): the index of the waypoint
+        of the published ``waypoints`` (P, 2) [m] whose reach asks for the next re-plan: P - 1
+        (none) when every straight leg is free by the leg test on the map and the remembered
+        obstacles; for a plan toward a subgoal (``result``), the subgoal when every leg up to it
+        is; else 1 (Algorithm 1)."""
+        if not (self.params.settle and self._rules_on() and len(waypoints) > 2):
+            return 1
+        free = self._placer().leg_walls(waypoints) == 0  # (P - 1,)
+        if free.all():
+            return len(waypoints) - 1
+        if result is not None and result.first_leg == "subgoal":
+            at = np.flatnonzero(np.all(np.abs(waypoints - result.waypoints[-2]) < 1e-6, axis=1))
+            if len(at) and at[0] > 1 and free[:at[0]].all():
+                return int(at[0])
+        return 1
 
     def _crosses_remembered(self, waypoints: np.ndarray) -> bool:
         """Whether the straight legs of ``waypoints`` (P, 2) [m] sweep the footprint over an

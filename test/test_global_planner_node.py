@@ -499,3 +499,24 @@ def test_the_subgoal_rule_is_built_with_the_map_and_acts_past_p_g_minus_one_wayp
     assert seen == [9, 12]
     r.spin_until(lambda: r.plans)  # each published (the plan topic keeps the last)
     assert r.planner.sparse.placer is None  # the fused placer only for the call
+
+
+def test_a_plan_toward_a_subgoal_is_followed_to_the_subgoal_when_its_legs_there_are_free(rig):
+    from dataclasses import replace
+
+    from ecahd_core.planner import SparsePlan
+
+    r = rig(num_candidates=4, place_reach=1.0, replan_spacing=3.0)
+    ready(r)
+    placer, start = r.planner._placer(), np.array(CORRIDOR)
+    sub = straight_goal(r.planner.grid, placer, start)
+    far = np.array(ROBOT)  # no straight free leg from the corridor's far end to here
+    assert placer.wall_length(sub, far[None])[0] > 0
+    wp = np.stack([start, 0.5 * (start + sub), sub, far])
+    plan = SparsePlan(waypoints=wp, candidates=wp[None], best=0, collision_costs=None,
+                      time_ms=0.0, first_leg="subgoal")
+    assert r.planner._follow(wp, plan) == 2  # to the subgoal, then a re-plan
+    assert r.planner._follow(wp, replace(plan, first_leg="")) == 1  # Algorithm 1
+    assert r.planner._follow(wp[:3], plan) == 2  # every leg free: the whole plan
+    r.planner.params = replace(r.planner.params, settle=False)
+    assert r.planner._follow(wp[:3], plan) == 1

@@ -130,7 +130,7 @@ def test_a_settled_plan_is_followed_whole_and_still_replans_on_a_timeout_or_a_bl
     r = GlobalRunner(GlobalRunnerConfig(horizon=4, replan_timeout=2.0))
     r.set_goal((2.0, 1.0))
     r.step((0.0, 0.0), 0.0)
-    r.accept(PLAN, 0.0, settled=True)
+    r.accept(PLAN, 0.0, follow=len(PLAN) - 1)
     assert r.step((0.95, 0.0), 1.5) is None and r.iteration == 1  # waypoint 1: no re-plan
     assert r.step((1.0, 0.5), 3.0) is None  # 1.5 s after waypoint 1: no timeout yet
     assert r.step((1.0, 0.95), 3.2) is None and r.iteration == 2  # waypoint 2
@@ -147,6 +147,11 @@ def test_a_settled_plan_is_followed_whole_and_still_replans_on_a_timeout_or_a_bl
     r.step((2.0, 1.0), 6.0)
     r.accept(PLAN[::-1].copy(), 6.0)
     assert r.step((1.0, 1.0), 6.5).reason == "waypoint"
+    rest = np.array([[1.0, 1.0], [1.0, 0.5], [1.0, 0.0], [0.5, 0.0], [0.0, 0.0]])
+    r.accept(rest, 6.5, follow=2)  # followed to its waypoint 2 (a subgoal), then re-planned
+    assert r.step((1.0, 0.55), 7.0) is None and r.iteration == 2
+    req = r.step((1.0, 0.05), 7.5)
+    assert req is not None and req.reason == "waypoint" and req.iteration == 3
 
 
 def test_a_burst_of_goals_is_coalesced():
