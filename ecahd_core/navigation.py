@@ -8,7 +8,8 @@ controller plugin split), and unit tests drive them with fake clocks and poses.
     P^g - p (Algorithm 1 lines 2-11, ``replan`` "every_waypoint"; with ``replan_spacing``, ours,
     at least what the distance left needs, :func:`replan_horizon`); with ``replan`` "once" (ours,
     and the Table III baselines A* and FD) one plan serves the whole goal. Beyond the paper, a
-    robot that reaches no waypoint for ``replan_timeout`` seconds replans from where it is, and
+    robot that makes no progress toward its next waypoint for ``replan_timeout`` seconds replans
+    from where it is, and
     goals that arrive faster than ``min_plan_interval`` are coalesced (the latest wins), so the
     planning work does not grow with the goal rate.
 
@@ -175,6 +176,9 @@ def simplify(xy: np.ndarray, tolerance: float = SIMPLIFY_TOLERANCE) -> np.ndarra
 
 # ----------------------------------------------------------------------------- global stage
 MAX_STALL_DOUBLINGS = 3  # GlobalRunnerConfig.replan_timeout grows at most 8-fold
+# [m] coming this much nearer the next waypoint than ever since it became the next one is
+# progress: it restarts replan_timeout's clock (a 6.5 m office leg takes 13 s at 0.5 m/s)
+PROGRESS_STEP = 0.25
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -185,8 +189,9 @@ class GlobalRunnerConfig:
         horizon: P^g, waypoints of a goal's first plan.
         waypoint_tolerance: [m] reaching the next waypoint this close replans; the goal this
             close is reached.
-        replan_timeout: [s] no waypoint reached for this long replans; 0 = never. Each
-            further timeout replan with no waypoint reached in between doubles it (at most
+        replan_timeout: [s] no waypoint reached and no progress toward the next one (coming
+            PROGRESS_STEP nearer it than before) for this long replans; 0 = never. Each
+            further timeout replan with no progress in between doubles it (at most
             2^MAX_STALL_DOUBLINGS times): on a slow or busy CPU a local stage that takes longer
             than the timeout would otherwise be restarted by every replan, and the robot would
             never move (seen on a 2-core machine at 4x real time).
@@ -249,7 +254,8 @@ class GlobalRunner:
         self.blocked_count = 0  # "blocked" replans asked for since the goal arrived
         self._hold = False  # the current goal's plan is followed to the end (a fallback)
         self._follow_to = 1  # index of the waypoint whose reach asks for a re-plan (settle)
-        self._last_reached = -math.inf  # [s] when a followed-past waypoint was last reached
+        self._last_progress = -math.inf  # [s] of the last progress (PROGRESS_STEP)
+        self._closest = math.inf  # [m] nearest the robot came to the next waypoint
         self.stalls = 0  # timeout replans since a waypoint was last reached
         self.stall_timeout = config.replan_timeout  # [s] the last timeout replan's wait
 
@@ -290,9 +296,9 @@ class GlobalRunner:
         xy = np.asarray(xy, dtype=np.float64).reshape(2)
         if not np.all(np.isfinite(xy)):
             raise PlanningError(f"robot position is not finite: {xy.tolist()}")
-        if now < self._last_request or now < self._last_plan or now < self._last_reached:
+        if now < self._last_request or now < self._last_plan or now < self._last_progress:
             # the clock jumped back (a restarted simulator)
-            self._last_request = self._last_plan = self._last_reached = -math.inf
+            self._last_request = self._last_plan = self._last_progress = -math.inf
         if self._pending:
             if now - self._last_request < c.min_plan_interval:
                 return None  # coalesce a burst of goals: the latest is planned next time
@@ -309,16 +315,19 @@ class GlobalRunner:
         if c.replan == "once" or self._hold:
             return None
         nxt = self._next
-        if len(self.waypoints) > nxt + 1 and \
-                float(np.linalg.norm(xy - self.waypoints[nxt])) < c.waypoint_tolerance:
+        dist = float(np.linalg.norm(xy - self.waypoints[nxt]))
+        if len(self.waypoints) > nxt + 1 and dist < c.waypoint_tolerance:
             self.iteration += 1  # MoveAgent reached t^g_p[1]: replan with P^g - p
             self.stalls = 0
             if nxt < self._follow_to:  # the settle rule: follow on to the next waypoint
-                self._next, self._last_reached = nxt + 1, now
+                self._next, self._last_progress = nxt + 1, now
+                self._closest = float(np.linalg.norm(xy - self.waypoints[nxt + 1]))
                 return None
             return self._request(xy, "waypoint")
+        if dist < self._closest - PROGRESS_STEP:  # nearer the next waypoint: not stalled
+            self._closest, self._last_progress, self.stalls = dist, now, 0
         timeout = c.replan_timeout * 2 ** min(self.stalls, MAX_STALL_DOUBLINGS)
-        if c.replan_timeout > 0 and now - max(self._last_plan, self._last_reached) > timeout:
+        if c.replan_timeout > 0 and now - max(self._last_plan, self._last_progress) > timeout:
             self._last_plan = now  # one timeout replan per period even if planning fails
             self.stalls, self.stall_timeout = self.stalls + 1, timeout
             return self._request(xy, "timeout")
@@ -354,6 +363,7 @@ class GlobalRunner:
         self._last_request = max(self._last_request, now)
         self._hold = self._hold or hold
         self._follow_to = int(follow)
+        self._closest = float(np.linalg.norm(self.waypoints[self._next] - self.waypoints[0]))
 
     def fail(self) -> None:
         """Planning for the goal failed for good (an unreachable goal): drop it."""

@@ -47,8 +47,9 @@ Parameters (read-only, declared in :data:`PARAMETERS`):
         followed whole: no re-plan at its waypoints; a plan toward a subgoal whose legs up to
         the subgoal are free, to the subgoal; timeout and blocked re-plans still act).
         As ``HierarchicalPlanner``'s ``subgoals`` and ``settle`` in ``ecahd bench planning``.
-    replan_timeout (double, 5.0): [s] no waypoint reached for this long replans (sd); 0 = never.
-        Doubles with each further such replan (at most 8x) until a waypoint is reached.
+    replan_timeout (double, 5.0): [s] no progress toward the next waypoint (reaching it, or
+        coming 0.25 m nearer it than before) for this long replans (sd); 0 = never.
+        Doubles with each further such replan (at most 8x) until the robot progresses again.
     warm_fraction (double, 0.0): sd, every_waypoint: the re-plan at a reached waypoint starts
         from the rest of the current plan noised to where the last ``warm_fraction`` (0..1) of
         SD's DDIM schedule begins and runs only those steps (``SparseConfig.warm_fraction``,
@@ -170,10 +171,11 @@ PARAMETERS = [
                               "by the leg test is followed whole, not re-planned at each "
                               "waypoint, and a plan toward a subgoal whose legs up to it are "
                               "free is followed to the subgoal (the settle rule)"),
-    ParamSpec("replan_timeout", 5.0, "[s] sd: with no waypoint reached for this long, replan "
-                                     "from the current pose (same horizon); doubles with each "
-                                     "further such replan (at most 8x) until a waypoint is "
-                                     "reached; 0 = never"),
+    ParamSpec("replan_timeout", 5.0, "[s] sd: with no progress toward the next waypoint (reaching "
+                                     "it, or coming 0.25 m nearer it than before) for this long, "
+                                     "replan from the current pose (same horizon); doubles with "
+                                     "each further such replan (at most 8x) until the robot "
+                                     "progresses again; 0 = never"),
     ParamSpec("warm_fraction", 0.0, "sd, every_waypoint: a re-plan at a reached waypoint starts "
                                     "from the rest of the current plan noised to the last F "
                                     "(0..1) of SD's DDIM schedule; 0 = from noise (Algorithm 1 "
@@ -568,8 +570,9 @@ class GlobalPlanner(Node):
         elif isinstance(event, PlanRequest):
             if event.reason == "timeout":
                 self.get_logger().warning(
-                    f"no waypoint reached for {self.runner.stall_timeout:g} s: replanning from "
-                    f"the current pose (timeout replan {self.runner.stalls} in a row)")
+                    f"no progress toward the next waypoint for {self.runner.stall_timeout:g} s: "
+                    f"replanning from the current pose (timeout replan {self.runner.stalls} in a "
+                    "row)")
             self._plan(event)
 
     # ----------------------------------------------------------------------------- planning

@@ -120,8 +120,8 @@ def test_timeout_replans_back_off_until_a_waypoint_is_reached():
     req = r.step((0.95, 0.0), 47.0)  # a waypoint reached: back to 2 s
     assert req.reason == "waypoint" and r.stalls == 0
     r.accept(PLAN[1:], 47.0)
-    assert r.step((1.0, 0.3), 49.0) is None
-    assert r.step((1.0, 0.3), 49.1).reason == "timeout"
+    assert r.step((1.0, 0.1), 49.0) is None  # 0.1 m on from the plan's start: no progress
+    assert r.step((1.0, 0.1), 49.1).reason == "timeout"
 
 
 def test_a_settled_plan_is_followed_whole_and_still_replans_on_a_timeout_or_a_blockage():
@@ -152,6 +152,28 @@ def test_a_settled_plan_is_followed_whole_and_still_replans_on_a_timeout_or_a_bl
     assert r.step((1.0, 0.55), 7.0) is None and r.iteration == 2
     req = r.step((1.0, 0.05), 7.5)
     assert req is not None and req.reason == "waypoint" and req.iteration == 3
+
+
+def test_progress_toward_the_next_waypoint_holds_off_the_timeout():
+    # a long leg driven at walking pace reaches no waypoint for longer than the timeout, but
+    # every PROGRESS_STEP nearer the next waypoint restarts its clock; standing still does not
+    from ecahd_core.navigation import PROGRESS_STEP
+
+    r = GlobalRunner(GlobalRunnerConfig(replan_timeout=2.0))
+    r.set_goal((12.0, 0.0))
+    r.step((0.0, 0.0), 0.0)
+    r.accept(np.array([[0.0, 0.0], [10.0, 0.0], [12.0, 0.0]]), 0.0)
+    t = 0.0
+    for x in np.arange(0.0, 9.0, 1.2 * PROGRESS_STEP):  # 30 s at 0.3 m/s without a waypoint
+        t += 1.0
+        assert r.step((x, 0.0), t) is None
+    last, req = t, None
+    while req is None and t < last + 20:  # stopped short of it: a timeout re-plan 2 s on
+        t = round(t + 0.1, 1)
+        req = r.step((x, 0.0), t)
+    assert last == 30 and req.reason == "timeout" and t == pytest.approx(last + 2.1)
+    assert r.step((x - 0.1, 0.0), t + 2.0) is None and r.step((x, 0.0), t + 4.2).reason == \
+        "timeout"  # backing and forth is no progress (the nearest distance stays the mark)
 
 
 def test_a_burst_of_goals_is_coalesced():
