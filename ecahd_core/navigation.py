@@ -9,9 +9,8 @@ controller plugin split), and unit tests drive them with fake clocks and poses.
     at least what the distance left needs, :func:`replan_horizon`); with ``replan`` "once" (ours,
     and the Table III baselines A* and FD) one plan serves the whole goal. Beyond the paper, a
     robot that makes no progress toward its next waypoint for ``replan_timeout`` seconds replans
-    from where it is, and
-    goals that arrive faster than ``min_plan_interval`` are coalesced (the latest wins), so the
-    planning work does not grow with the goal rate.
+    from where it is, and goals that arrive faster than ``min_plan_interval`` are coalesced (the
+    latest wins), so the planning work does not grow with the goal rate.
 
 :class:`LocalRunner` (local_refiner): Algorithm 1 lines 13-18 and the controller.
     The global plan's segments W[k-1] -> W[k] (the first from the robot's pose when the plan

@@ -671,11 +671,11 @@ class HierarchicalPlanner:
             first leg by the same test; a plan toward a subgoal (``subgoals``) whose legs up to
             the subgoal are all free is followed to the subgoal the same way (the re-plans then
             start there). DD and the exact rule still make every local plan. With backtracking
-            on, a leg of that plan (after its first) whose local plan the
-            exact checker still finds in collision (the leg test judges the footprint by
-            circles) is cut there, and from its start the iterations re-plan at each waypoint
-            as without the rule (a backtracking round). :attr:`HierarchicalPlan.settled` is
-            the iteration whose plan was followed (None after such a cut).
+            on, a leg of that plan (after its first) whose local plan the exact checker still
+            finds in collision (the leg test judges the footprint by circles) is cut there, and
+            from its start the iterations re-plan at each waypoint as without the rule (a
+            backtracking round). :attr:`HierarchicalPlan.settled` is the iteration whose plan
+            was followed (None after such a cut).
     """
 
     def __init__(self, sparse: SparseDiffusion, dense_checkpoint, *, costmap, footprint_points,
