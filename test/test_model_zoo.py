@@ -160,14 +160,15 @@ def test_train_all_fits_its_steps_to_a_time_budget(tmp_path, capsys, monkeypatch
         taken = {k: int(re.search(rf"^{k}: (\d+) steps", out, re.M)[1]) for k in ("sd", "dd")}
         return float(found[1]), {"sd": int(found[2]), "dd": int(found[3])}, taken
 
-    # the step-time probe reads a slow machine (0.4 s a step): 12 s leave a few steps of every
-    # recipe by the estimate, one factor on every recipe; the machine is in fact faster (with
-    # room for a slow first step), so each model trains on to the cap (STEP_CAP x its
-    # estimate), not past it
-    monkeypatch.setattr(train, "seconds_per_step", lambda *a, **k: 0.4)
+    # the step-time probe reads a slow machine (0.8 s a step): 12 s leave a few steps of every
+    # recipe by the estimate, one factor on every recipe; the machine is in fact far faster
+    # (room for a slow first step, and for a machine busy with other work: at 0.4 s a step a
+    # loaded machine once fell one step short), so each model trains on to the cap (STEP_CAP x
+    # its estimate), not past it
+    monkeypatch.setattr(train, "seconds_per_step", lambda *a, **k: 0.8)
     assert main(args + ["--minutes", "0.2"]) == 0
     scale, estimated, taken = steps_of(capsys.readouterr().out)
-    assert 0 < scale < BUDGET_FILL * 12 / (0.4 * RECIPES["sd"].steps)
+    assert 0 < scale < BUDGET_FILL * 12 / (0.8 * RECIPES["sd"].steps)
     for k in ("sd", "dd"):
         assert abs(estimated[k] - RECIPES[k].steps * scale) <= 1 + 0.01 * estimated[k]
         assert estimated[k] <= taken[k] <= int(estimated[k] * STEP_CAP)
