@@ -29,7 +29,7 @@ SNAP_REACH = 0.5
 # the subgoal rule (SubgoalRule): a re-plan beyond Algorithm 1's P^g - 1 iterations whose first
 # leg is not free or brings the robot less than SUBGOAL_TRIGGER [m] nearer the goal by its
 # cost-to-go plans toward the farthest point of the shortest route within SUBGOAL_REACH x the
-# replan spacing that a free straight leg reaches, kept if its first leg is free and gains
+# replan spacing that a straight leg reaches (route_sight), kept if its first leg is free and gains
 # SUBGOAL_GAIN [m] on the other's
 SUBGOAL_TRIGGER = 0.5
 SUBGOAL_REACH = 1.0
@@ -133,6 +133,21 @@ class CostToGo:
         return graph.rep_xy[route].copy()
 
 
+def route_sight(placer, start, route) -> np.ndarray:
+    """Which points of ``route`` (K, 2) [m], a shortest route from ``start`` (2,) [m], a
+    straight leg from ``start`` reaches -> (K,) bool: the leg crosses no more wall by the
+    placer's leg test (``WaypointPlacer.wall_length``) than the route itself does from
+    ``start`` to that point. The route's points are coarse nodes the footprint fits by A*'s
+    clearance, which the leg test (conservative by up to half a cell diagonal) may find a few
+    centimetres near a door's jamb: a straight leg that grazes no more than the route is as
+    good as it (a robot standing in a door sees through it); one that cuts a corner is not.
+    The leg test samples a leg once per cell, so the two may differ by a sample: a cell's
+    width is the tolerance."""
+    pts = np.concatenate([np.asarray(start, dtype=np.float64).reshape(1, 2), route])
+    own = np.cumsum(placer.leg_walls(pts))  # (K,) [m] the route's own legs up to each point
+    return placer.wall_length(pts[0], route) <= own + placer.grid.resolution
+
+
 class SubgoalRule:
     """The subgoal rule (ours) on one map for one footprint.
 
@@ -140,9 +155,10 @@ class SubgoalRule:
     behind it) whose first leg is not free or brings the robot less than SUBGOAL_TRIGGER nearer
     the goal by the goal's cost-to-go (:class:`GoalField`, one coarse Dijkstra per goal, kept
     for the last goal) is drawn again by SD toward a subgoal: of the shortest route's points
-    within SUBGOAL_REACH x ``spacing``, the farthest a straight leg reaches free; that plan,
-    followed by the goal, is kept if its first leg is free and gains SUBGOAL_GAIN on the
-    other's. SD still draws the waypoints.
+    within SUBGOAL_REACH x ``spacing``, the farthest a straight leg reaches (:func:`route_sight`:
+    no more wall by the leg test than the route's own legs); that plan, followed by the goal,
+    is kept if its first leg is free and gains SUBGOAL_GAIN on the other's. SD still draws the
+    waypoints.
 
     Args:
         grid: the GridMap the cost-to-go is computed on (the static map).
@@ -188,7 +204,7 @@ class SubgoalRule:
             return sparse
         # the farthest point of the route a straight leg from S reaches (the route's end if
         # none does): SD then plans round the corner from there on
-        seen = np.flatnonzero(sd.placer.wall_length(S, route) == 0)
+        seen = np.flatnonzero(route_sight(sd.placer, S, route))
         sub = route[seen[-1] if len(seen) else -1]
         if np.linalg.norm(sub - S) < sd.placer.step:
             return sparse

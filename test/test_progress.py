@@ -173,3 +173,32 @@ def test_a_colliding_leg_of_a_settled_plan_is_cut_and_re_planned_from_its_start(
     assert np.allclose(plan.global_plans[cut - 1], first.global_plans[cut - 1])  # kept
     assert np.allclose(plan.global_plans[cut][0], first.global_plans[cut][0])  # from its start
     assert np.allclose(plan.trajectory[-1], prob.goal, atol=1e-4)
+
+
+def test_route_sight_lets_a_robot_standing_in_a_tight_door_see_along_the_route_through_it():
+    from ecahd_core.progress import route_sight
+
+    # a wall at x in [4.8, 5.0] m with a door 0.85 m wide (y in [2.85, 3.7]) for the 0.8 m
+    # circle: A*'s clearance fits it, the leg test (conservative by half a cell diagonal) finds
+    # the coarse route's own points a few centimetres near the jambs
+    data = np.zeros((120, 200), dtype=np.int8)
+    data[:, 96:100] = 100
+    data[57:74, 96:100] = 0
+    grid, fp = GridMap(data, 0.05, (0.0, 0.0), name="door"), make_footprint("circle")
+    placer = WaypointPlacer(grid, fp, reach=1.0)
+    to_go = GoalField(grid, fp).to(np.array([7.0, 1.0]))
+    door = np.array([4.9, 3.27])
+    route = to_go.route(door, 6.0)
+    walls = placer.wall_length(door, route)
+    assert walls[0] == 0 and walls[1] > 0  # a straight leg free of walls sees no further
+    seen = np.flatnonzero(route_sight(placer, door, route))
+    assert seen[-1] >= 1 and np.linalg.norm(route[seen[-1]] - door) > placer.step
+    own = np.cumsum(placer.leg_walls(np.concatenate([door[None], route])))
+    assert np.all(walls[seen] <= own[seen] + grid.resolution)
+    # a leg cutting a corner that the route goes round is not seen: from the room, the points
+    # past the door stay hidden (as with the strict test), those before it are seen
+    room = np.array([3.0, 4.5])
+    route = to_go.route(room, 6.0)
+    sight = route_sight(placer, room, route)
+    free = placer.wall_length(room, route) == 0
+    assert np.array_equal(sight, free) and free[0] and not free[-1]
