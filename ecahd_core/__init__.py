@@ -12,7 +12,9 @@ Modules, by question:
 - ``diffusion``   schedule + DDIM, denoisers (Transformer, FD's temporal U-Net), sampler, training
 - ``guidance``    the cost J as a guide for the sampler (Algorithm 2 line 5)
 - ``model_zoo``   training recipes, shipped models and their identity checks
-- ``planner``     SparseDiffusion (best of N), HierarchicalPlanner (Algorithms 1-2), FullDiffusion
+- ``planning``    Algorithm 1: SparseDiffusion (best of N), the rules round it, HierarchicalPlanner
+                  (Algorithms 1-2), FullDiffusion, and the online runners the nodes call
+- ``validation``  checks of poses and plans from outside, with errors naming the problem
 - ``problems``    seeded held-out benchmark problems
 - ``viz``         figures
 - ``bench``       benchmarks; ``commands``: the ``ecahd`` subcommands that need no ROS

@@ -1,6 +1,6 @@
 """The goal's cost-to-go over the free space a footprint fits, and the re-plan loop's subgoal
 rule that uses it (ours, beyond the paper; :class:`SubgoalRule`, used by
-:class:`~ecahd_core.planner.HierarchicalPlanner` and the ``global_planner`` node).
+:class:`~ecahd_core.planning.hierarchical.HierarchicalPlanner` and the ``global_planner`` node).
 
 A re-plan loop (Algorithm 1 with a replan spacing) that has used its P^g - 1 iterations and is
 not at the goal is usually circling a wall with the goal behind it: SD's candidates all aim at
@@ -21,7 +21,7 @@ import numpy as np
 
 from ecahd_core.astar import (COARSE_BLOCK_SIZE, AStarPlanner, CoarseAStarPlanner,
                               clearance_for_footprint)
-from ecahd_core.navigation import replan_horizon
+from ecahd_core.planning.horizon import replan_horizon
 
 # [m] how far round a point without the clearance (a waypoint beside a wall) its cost-to-go
 # looks for cells that have it

@@ -559,7 +559,7 @@ class ObstacleMemory:
         Returns (path (N, 2) [m], how many of the two maps were tried). Raises PlanningError
         naming both when neither holds a way."""
         from ecahd_core.errors import PlanningError
-        from ecahd_core.navigation import detour
+        from ecahd_core.planning.detour import detour
 
         grids = (self.fused(now), self.fused(now, within=RECENT_OBSTACLES))
         for i, grid in enumerate(grids):

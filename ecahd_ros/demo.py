@@ -314,7 +314,7 @@ def run_demo(config: DemoConfig) -> DemoResult:
 
     from ecahd_core.errors import EcahdError
     from ecahd_core.evaluation import CONTROL_PERIOD, CONTROL_STAGE
-    from ecahd_core.navigation import SNAP_DISTANCE
+    from ecahd_core.planning.horizon import SNAP_DISTANCE
     from ecahd_ros.bag_recorder import BagRecorder
     from ecahd_ros.eval_bag import evaluate_bag, write_outputs
     from ecahd_ros.qos import MAP_QOS, PLAN_QOS, STREAM_QOS

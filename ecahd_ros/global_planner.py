@@ -2,7 +2,7 @@
 Algorithm 1 lines 2-11 with its shrinking horizon), and the Table III baselines' global planners.
 
 A goal becomes a plan here. The node is a thin shell over
-:class:`ecahd_core.navigation.GlobalRunner` (when to plan, unit-tested without ROS). With
+:class:`ecahd_core.planning.online.GlobalRunner` (when to plan, unit-tested without ROS). With
 ``method`` "sd" (ECAHD): on ``goal_pose`` the node samples N
 candidate global plans of P^g waypoints from the robot's pose (``odom``) to the goal in one
 batch, keeps the best of N and publishes its waypoints on ``plan``. When the robot comes within
@@ -99,11 +99,14 @@ from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ecahd_core.errors import EcahdError, PlanningError
-from ecahd_core.navigation import (REPLAN_POLICIES, SNAP_DISTANCE, GlobalRunner,
-                                   GlobalRunnerConfig, PlanRequest, validate_pose)
 from ecahd_core.placement import LEG_BATCHES
-from ecahd_core.planner import SELECTION_RULES, SparseConfig, SparseDiffusion, SparsePlan
+from ecahd_core.planning.horizon import REPLAN_POLICIES
+from ecahd_core.planning.online import (ASTAR_SPACING, METHODS, GlobalRunnerConfig,
+                                        OnlinePlanner, OnlinePlannerConfig, PlanOutcome)
+from ecahd_core.planning.sparse import SELECTION_RULES, SparseConfig, SparseDiffusion, SparsePlan
 from ecahd_core.threads import PRECISION_CHOICES
+from ecahd_core.validation import validate_pose
+from ecahd_ros.callbacks import check_frame, guard, now_seconds
 from ecahd_ros.conversions import msg_to_grid, timing_message, xy_to_path
 from ecahd_ros.params import (ParamSpec, collision_cost, declare_parameters, make_robot,
                               read_parameters, require, require_cost_margin,
@@ -111,8 +114,7 @@ from ecahd_ros.params import (ParamSpec, collision_cost, declare_parameters, mak
 from ecahd_ros.qos import MAP_QOS, PLAN_QOS, STREAM_QOS, VIZ_QOS
 from ecahd_ros.spin import spin_node
 
-METHODS = ("sd", "astar", "fd")  # ECAHD's Sparse Diffusion; the Table III baselines' planners
-ASTAR_SPACING = 0.25  # [m] most distance between consecutive points of a published A* path
+__all__ = ["ASTAR_SPACING", "GlobalPlanner", "GlobalPlannerParams", "PARAMETERS", "main"]
 
 PARAMETERS = [
     ParamSpec("method", "sd", f"global planner: {list(METHODS)} (sd: ECAHD, replanned at each "
@@ -258,20 +260,17 @@ class GlobalPlannerParams:
         require(0.0 <= self.warm_fraction <= 1.0, "warm_fraction", self.warm_fraction,
                 "in 0..1 (0: off)")
 
-    def runner_config(self, grid=None, expert_spacing: float | None = None
-                      ) -> GlobalRunnerConfig:
-        """The runner's settings; ``replan_spacing`` -1 is decided by ``grid`` and the SD
-        model's ``expert_spacing`` [m] (off without a grid, before the map arrives)."""
-        from ecahd_core.navigation import auto_replan_spacing
-
-        spacing = self.replan_spacing or None
-        if spacing == -1:
-            spacing = auto_replan_spacing(grid, expert_spacing) if grid is not None else None
-        # the baselines plan one whole path per goal
+    def runner_config(self) -> GlobalRunnerConfig:
+        """The GlobalRunner's settings (its replan spacing is decided per map by
+        :meth:`~ecahd_core.planning.online.OnlinePlanner.set_map`)."""
         return GlobalRunnerConfig(horizon=self.horizon, waypoint_tolerance=self.waypoint_tolerance,
-                                  replan_timeout=self.replan_timeout if self.method == "sd" else 0,
-                                  replan=self.replan if self.method == "sd" else "once",
-                                  replan_spacing=spacing)
+                                  replan_timeout=self.replan_timeout, replan=self.replan)
+
+    def online_config(self) -> OnlinePlannerConfig:
+        return OnlinePlannerConfig(method=self.method, place_reach=self.place_reach,
+                                   leg_repair=self.leg_repair, repair_reach=self.repair_reach,
+                                   replan_spacing=self.replan_spacing, subgoals=self.subgoals,
+                                   settle=self.settle, obstacle_memory=self.obstacle_memory)
 
     def sparse_config(self) -> SparseConfig:
         return SparseConfig(num_candidates=self.num_candidates, horizon=self.horizon,
@@ -305,6 +304,9 @@ def candidate_markers(plan: SparsePlan, frame_id: str, stamp) -> MarkerArray:
 
 
 class GlobalPlanner(Node):
+    """The node: parameters in, messages in, :class:`~ecahd_core.planning.online.
+    OnlinePlanner` (when and what to plan, the offline planner's SparseStage), messages out."""
+
     def __init__(self, **kwargs) -> None:
         super().__init__("global_planner", **kwargs)
         declare_parameters(self, PARAMETERS)
@@ -325,32 +327,24 @@ class GlobalPlanner(Node):
 
         set_torch_threads(p.torch_threads)
         lower_priority(p.nice)  # this thread spins the executor: SD and A* run on it
-        self.generator = torch.Generator().manual_seed(p.seed)
-        self.grid = None
-        self.sparse: SparseDiffusion | None = None  # method sd
-        self.astar = None  # method astar: ecahd_core.astar.AStarPlanner
-        self.fd = None  # method fd: ecahd_core.planner.FullDiffusion
+        self.planning = OnlinePlanner(p.online_config(), p.runner_config(), self.judged,
+                                      clock=self._now,
+                                      generator=torch.Generator().manual_seed(p.seed))
         self.pose: np.ndarray | None = None  # (2,) [m] latest valid odometry position
-        self.runner = GlobalRunner(p.runner_config())
         self._plan_pub = self.create_publisher(Path, "plan", PLAN_QOS)
         self._cand_pub = self.create_publisher(MarkerArray, "plan_candidates", VIZ_QOS)
         self._timing_pub = self.create_publisher(String, "ecahd/timing", STREAM_QOS)
         self._ready_pub = self.create_publisher(String, "ecahd/planner_ready", MAP_QOS)
-        self.create_subscription(OccupancyGrid, "map", self._guard(self._on_map), MAP_QOS)
-        self.create_subscription(PoseStamped, "goal_pose", self._guard(self._on_goal),
+        self.create_subscription(OccupancyGrid, "map", guard(self, self._on_map), MAP_QOS)
+        self.create_subscription(PoseStamped, "goal_pose", guard(self, self._on_goal),
                                  STREAM_QOS)
-        self.create_subscription(Odometry, "odom", self._guard(self._on_odom), STREAM_QOS)
+        self.create_subscription(Odometry, "odom", guard(self, self._on_odom), STREAM_QOS)
         self.create_subscription(OccupancyGrid, "local_costmap",
-                                 self._guard(self._on_local_costmap), VIZ_QOS)
-        self.create_subscription(String, "ecahd/replan", self._guard(self._on_replan),
+                                 guard(self, self._on_local_costmap), VIZ_QOS)
+        self.create_subscription(String, "ecahd/replan", guard(self, self._on_replan),
                                  STREAM_QOS)
-        self.memory = None  # ecahd_core.sensing.ObstacleMemory of the scanned obstacles
-        self._static_cost = None  # J's tuple on the static map (collision-aware selection)
-        self._placer_cache = None  # (key of the fused grid, its WaypointPlacer)
-        self.subgoal_rule = None  # ecahd_core.progress.SubgoalRule on the static map
-        self.fallbacks = 0  # A* fallbacks after repeated "blocked" replans
         # a goal coalesced in a burst is planned within one period even without odometry
-        self.create_timer(p.runner_config().min_plan_interval, self._guard(self._on_pending))
+        self.create_timer(p.runner_config().min_plan_interval, guard(self, self._on_pending))
         what = f"SD, N={p.num_candidates}, P^g={p.horizon}" if p.method == "sd" else p.method
         self.get_logger().info(f"global planner ready: {what}, robot {self.footprint.name!r}, "
                                "waiting for map and odom")
@@ -358,79 +352,53 @@ class GlobalPlanner(Node):
     @property
     def ready(self) -> bool:
         """A map arrived and the planner of ``method`` is built on it."""
-        return any(x is not None for x in (self.sparse, self.astar, self.fd))
+        return self.planning.ready
+
+    @property
+    def runner(self):
+        return self.planning.runner
 
     @property
     def goal(self) -> np.ndarray | None:
-        return self.runner.goal
+        return self.planning.runner.goal
 
     @property
     def waypoints(self) -> np.ndarray | None:
-        return self.runner.waypoints
-
-    # ------------------------------------------------------------------------- callbacks
-    def _guard(self, callback):
-        """Wrap a callback so no exception escapes: EcahdError is logged as an error, anything
-        else with its traceback."""
-        def wrapped(*msg) -> None:
-            try:
-                callback(*msg)
-            except EcahdError as exc:
-                self.get_logger().error(str(exc))
-            except Exception:  # noqa: BLE001 (a node must survive a bug in one message)
-                import traceback
-
-                self.get_logger().error(f"{callback.__name__} failed:\n"
-                                        f"{traceback.format_exc()}")
-        return wrapped
+        return self.planning.runner.waypoints
 
     def _now(self) -> float:
-        return self.get_clock().now().nanoseconds * 1e-9
+        return now_seconds(self)
 
+    # ------------------------------------------------------------------------- callbacks
     def _on_map(self, msg: OccupancyGrid) -> None:
         p = self.params
-        if msg.header.frame_id != p.global_frame:
-            raise EcahdError(f"map in frame {msg.header.frame_id!r} ignored: expected "
-                             f"{p.global_frame!r}")
+        check_frame(msg.header.frame_id, p.global_frame, "map")
         t0 = time.perf_counter()
         grid = msg_to_grid(msg, name=p.map_name)
-        sparse = astar = fd = None
+        built = {}
         warm = ""
         if p.method == "sd":
-            sparse = self._build_sd(grid)
+            built["sd"] = sd = self._build_sd(grid)
             x0, y0, x1, y1 = grid.bounds  # the first real plan then costs what later ones do
-            warm = f", warm-up plan {sparse.warm_up((0.5 * (x0 + x1), 0.5 * (y0 + y1))):.0f} ms"
+            warm = f", warm-up plan {sd.warm_up((0.5 * (x0 + x1), 0.5 * (y0 + y1))):.0f} ms"
         elif p.method == "astar":
             from ecahd_core.astar import clearance_for_footprint, planner_for
 
-            astar = planner_for(grid, clearance_for_footprint(self.judged))
+            built["astar"] = planner_for(grid, clearance_for_footprint(self.judged))
         else:
-            fd = self._build_fd(grid)
-        self.grid, self.sparse, self.astar, self.fd = grid, sparse, astar, fd
-        # replan_spacing may depend on the map and the model
-        self.runner.config = p.runner_config(grid, sparse.expert_spacing if sparse else None)
-        from ecahd_core.sensing import ObstacleMemory
-
-        self.memory = ObstacleMemory(grid, p.obstacle_memory)
-        self._static_cost = sparse.cost if sparse is not None else None
-        self._placer_cache = None  # a new map: a new distance transform
-        spacing = self.runner.config.replan_spacing
-        self.subgoal_rule = None
-        if self._rules_on() and p.subgoals:  # the cost-to-go's graph now, not on a re-plan
-            from ecahd_core.progress import SubgoalRule
-
-            self.subgoal_rule = SubgoalRule(grid, self.judged, spacing)
-            self.subgoal_rule.field.graph
+            built["fd"] = self._build_fd(grid)
+        had_goal = self.goal is not None
+        self.planning.set_map(grid, **built)
         ms = (time.perf_counter() - t0) * 1e3
+        spacing = self.planning.replan_spacing
         self.get_logger().info(f"map {grid.name!r} received ({grid.width} x {grid.height} "
                                f"cells); {p.method} planner built in {ms:.0f} ms{warm}"
                                + (f"; re-plans keep a waypoint per {spacing:g} m left to the "
                                   f"goal (replan_spacing)" if spacing else ""))
         self._ready_pub.publish(String(data=json.dumps(
             {"map": grid.name, "method": p.method, "ms": round(ms, 1)})))
-        if self.runner.goal is not None:
-            self.runner.set_goal(self.runner.goal)  # plan again on the new map
-            self._step()
+        if had_goal:
+            self._step()  # plan again on the new map
 
     def _build_sd(self, grid) -> SparseDiffusion:
         from ecahd_core.model_zoo import load_model
@@ -444,7 +412,7 @@ class GlobalPlanner(Node):
 
     def _build_fd(self, grid):
         from ecahd_core.model_zoo import load_model
-        from ecahd_core.planner import FullDiffusion
+        from ecahd_core.planning.full import FullDiffusion
 
         p = self.params
         ckpt = load_model("fd", grid, path=p.fd_model or None, footprint=self.footprint)
@@ -453,21 +421,17 @@ class GlobalPlanner(Node):
                              num_steps=p.ddim_steps or None)
 
     def _on_goal(self, msg: PoseStamped) -> None:
-        p = self.params
-        frame = msg.header.frame_id
-        if frame != p.global_frame:
-            raise PlanningError(f"goal rejected: frame {frame!r} is not the global frame "
-                                f"{p.global_frame!r}")
+        check_frame(msg.header.frame_id, self.params.global_frame, "goal")
         try:
             x, y, _ = validate_pose((msg.pose.position.x, msg.pose.position.y, 0.0), "goal")
             xy = np.array([x, y])
-            if self.grid is not None:
-                xy = self.grid.validate_point(xy, "goal")
+            if self.planning.grid is not None:
+                xy = self.planning.grid.validate_point(xy, "goal")
         except PlanningError as exc:
             raise PlanningError(f"goal rejected: {exc}") from None
-        self.runner.set_goal(xy)
-        if not self.ready or self.pose is None:
-            missing = " and ".join(n for n, ok in (("map", self.ready),
+        self.planning.set_goal(xy)
+        if not self.planning.ready or self.pose is None:
+            missing = " and ".join(n for n, ok in (("map", self.planning.ready),
                                                    ("odom", self.pose is not None)) if not ok)
             self.get_logger().info(f"goal ({xy[0]:.2f}, {xy[1]:.2f}) queued until {missing} "
                                    f"arrive(s)")
@@ -475,9 +439,8 @@ class GlobalPlanner(Node):
         self._step()
 
     def _on_odom(self, msg: Odometry) -> None:
-        if msg.header.frame_id and msg.header.frame_id != self.params.global_frame:
-            raise PlanningError(f"odometry in frame {msg.header.frame_id!r}, expected "
-                                f"{self.params.global_frame!r}: ignored")
+        if msg.header.frame_id:
+            check_frame(msg.header.frame_id, self.params.global_frame, "odometry")
         pos = msg.pose.pose.position
         try:
             x, y, _ = validate_pose((pos.x, pos.y, 0.0), "odometry pose")
@@ -487,13 +450,10 @@ class GlobalPlanner(Node):
         self._step()
 
     def _on_local_costmap(self, msg: OccupancyGrid) -> None:
-        if msg.header.frame_id != self.params.global_frame:
-            raise EcahdError(f"local_costmap in frame {msg.header.frame_id!r} ignored: expected "
-                             f"{self.params.global_frame!r}")
-        if self.memory is None:
-            return
-        window = msg_to_grid(msg, name="local_costmap", unknown_is_occupied=False)
-        self.memory.update(window, self._now())
+        check_frame(msg.header.frame_id, self.params.global_frame, "local_costmap")
+        if self.planning.grid is not None:
+            window = msg_to_grid(msg, name="local_costmap", unknown_is_occupied=False)
+            self.planning.observe(window, self._now())
 
     def _on_replan(self, msg: String) -> None:
         """The refiner cannot follow the plan (a segment blocked by a scanned obstacle)."""
@@ -502,213 +462,46 @@ class GlobalPlanner(Node):
         except (ValueError, AttributeError):
             raise EcahdError(f"ecahd/replan ignored: not a JSON object: {msg.data[:80]!r}") \
                 from None
-        if self.runner.goal is None:
+        if self.goal is None:
             return
-        self.runner.request_replan(reason)
+        self.planning.request_replan(reason)
         self._step()
 
-    def _fused_grid(self):
-        """The static map with the obstacles the scans found (remembered for
-        ``obstacle_memory`` s unless seen gone), or the static map."""
-        if self.memory is None:
-            return self.grid
-        return self.memory.fused(self._now())
-
-    def _grid_key(self, grid):
-        """What tells fused grids apart for the caches: None for the static map."""
-        return None if grid is self.grid else grid.occupied.tobytes()
-
-    def _rules_on(self) -> bool:
-        """Whether the subgoal and settle rules can act: sd, every_waypoint, a replan spacing,
-        placement on and the free-first-leg rule on (as in ``HierarchicalPlanner``)."""
-        p = self.params
-        return (p.method == "sd" and p.replan == "every_waypoint" and self.grid is not None
-                and self.runner.config.replan_spacing is not None and self._placement_on()
-                and p.leg_batches >= 0 and p.warm_fraction == 0)
-
-    def _placement_on(self) -> bool:
-        """Whether place_reach (-1: by the map) moves waypoints farther than the goal snap."""
-        from ecahd_core.placement import auto_reach
-
-        p = self.params
-        return (auto_reach(self.grid) if p.place_reach < 0 else p.place_reach) > SNAP_DISTANCE
-
-    def _placer(self):
-        """The WaypointPlacer on :meth:`_fused_grid` (its distance transform is built once per
-        fused grid)."""
-        from ecahd_core.placement import WaypointPlacer, auto_reach
-
-        grid = self._fused_grid()
-        key = self._grid_key(grid)
-        if self._placer_cache is None or self._placer_cache[0] != key:
-            p = self.params
-            reach = auto_reach(self.grid) if p.place_reach < 0 else p.place_reach
-            on = self._placement_on()  # off: the 0.2 m snap, no waypoint added
-            self._placer_cache = (key, WaypointPlacer(
-                grid, self.judged, reach=reach if on else SNAP_DISTANCE,
-                leg_rounds=p.leg_repair if on else 0,
-                repair_reach=p.repair_reach if p.repair_reach > 0 else None))
-        return self._placer_cache[1]
-
-    def _fused_cost(self):
-        """J's (costmap, footprint points, config) on the static map and the remembered
-        obstacles (``ObstacleMemory.fused_cost``)."""
-        return self.memory.fused_cost(self._now(), self._static_cost)
-
     def _on_pending(self) -> None:
-        if self.runner.pending:
+        if self.planning.runner.pending:
             self._step()
 
     def _step(self) -> None:
-        """Ask the runner what to do at the current pose, and do it."""
-        if not self.ready or self.pose is None:
+        """One call of the core at the current pose, and its result out."""
+        if self.pose is None:
             return
-        goal = self.runner.goal
-        event = self.runner.step(self.pose, self._now())
-        if event == "reached":
+        goal = self.goal
+        outcome = self.planning.step(self.pose)
+        if outcome == "reached":
             self.get_logger().info(f"goal ({goal[0]:.2f}, {goal[1]:.2f}) reached")
-        elif isinstance(event, PlanRequest):
-            if event.reason == "timeout":
-                self.get_logger().warning(
-                    f"no progress toward the next waypoint for {self.runner.stall_timeout:g} s: "
-                    f"replanning from the current pose (timeout replan {self.runner.stalls} in a "
-                    "row)")
-            self._plan(event)
+        elif isinstance(outcome, PlanOutcome):
+            self._publish(outcome)
 
-    # ----------------------------------------------------------------------------- planning
-    def _plan(self, request: PlanRequest) -> None:
-        """Plan for ``request`` and publish: SD best-of-N with its horizon, or the baseline's
-        whole path. A goal that cannot be planned to is dropped."""
-        try:
-            goal = self.grid.validate_point(request.goal, "goal")
-            start = self.grid.validate_point(request.start, "robot pose")
-        except PlanningError as exc:
-            if "goal" in str(exc).split(":")[0]:
-                self.runner.fail()
-            raise PlanningError(f"cannot plan: {exc}") from None
-        method, result, detail = self.params.method, None, ""
-        blocked = request.reason == "blocked"
-        if blocked and (method != "sd" or self.runner.blocked_count >= 2):
-            method = "fallback_astar"  # SD could not get round it: A* on what is known
-            waypoints, ms = self._plan_fallback(start, goal)
-        elif method == "sd":
-            saved = self.sparse.cost
-            if saved is not None:  # weigh the candidates by J with the scanned obstacles too
-                self.sparse.cost = self._fused_cost()
-            # the robot follows the first leg to the next re-plan: SD's rule for a free first
-            # leg (leg_batches) judges it with the placer on the map and the remembered obstacles
-            first_leg = self.params.replan == "every_waypoint" and self._placement_on()
-            if first_leg:
-                self.sparse.placer = self._placer()
-            try:
-                # a re-plan at a reached waypoint may start from the rest of the current plan
-                # (warm_fraction; from noise when 0, bit for bit)
-                previous = self.runner.waypoints if request.reason == "waypoint" else None
-                t0 = time.perf_counter()
-                result = self.sparse.replan(start, goal, previous, horizon=request.horizon,
-                                            generator=self.generator,
-                                            repair_legs=1 if first_leg else None)
-                if (self.subgoal_rule is not None
-                        and request.iteration >= self.params.horizon - 1):
-                    result = self.subgoal_rule.apply(self.sparse, start, goal, result,
-                                                     request.iteration,
-                                                     generator=self.generator)
-                    if result.first_leg == "subgoal":
-                        detail = " (toward a subgoal on the shortest route)"
-            finally:
-                self.sparse.cost, self.sparse.placer = saved, None
-            waypoints, ms = result.waypoints.copy(), (time.perf_counter() - t0) * 1e3
-            detail = detail or f" (candidate {result.best} of {len(result.candidates)})"
-            if self._crosses_remembered(waypoints):  # SD cannot see round it: detour now
-                method, result = "fallback_astar", None
-                waypoints, ms_fallback = self._plan_fallback(start, goal)
-                ms += ms_fallback
-                detail = " (SD's best crossed an obstacle the scans found)"
-        elif method == "astar":
-            waypoints, ms = self._plan_astar(start, goal)
-        else:
-            t0 = time.perf_counter()
-            waypoints = self.fd.plan(start, goal, generator=self.generator)
-            ms = (time.perf_counter() - t0) * 1e3
-        waypoints[0], waypoints[-1] = start, goal  # exact ends (the models work in float32)
-        if method == "sd":  # SD's waypoints in a wall move into free space (ours)
-            waypoints, moved = self._placer()(waypoints, last_reach=SNAP_DISTANCE)
-            if moved:
-                detail += f", {moved} waypoint(s) moved out of or added round walls"
-        follow = self._follow(waypoints, result) if method == "sd" else 1
-        if follow == len(waypoints) - 1 > 1:
-            detail += ", every leg free: followed whole (settle rule)"
-        elif follow > 1:
-            detail += f", legs free up to the subgoal: followed to waypoint {follow} (settle rule)"
+    def _publish(self, out: PlanOutcome) -> None:
+        """A plan out: ``plan``, ``plan_candidates`` (SD), ``ecahd/timing`` and a log line."""
+        frame, runner = self.params.global_frame, self.planning.runner
+        if out.request.reason == "timeout":
+            self.get_logger().warning(
+                f"no progress toward the next waypoint for {runner.stall_timeout:g} s: "
+                f"replanning from the current pose (timeout replan {runner.stalls} in a row)")
         stamp = self.get_clock().now()
-        self.runner.accept(waypoints, stamp.nanoseconds * 1e-9, hold=method == "fallback_astar",
-                           follow=follow)
-        self._plan_pub.publish(xy_to_path(waypoints, self.params.global_frame, stamp.to_msg()))
-        if result is not None:
-            self._cand_pub.publish(candidate_markers(result, self.params.global_frame,
-                                                     stamp.to_msg()))
-        self._timing_pub.publish(timing_message(method, ms, stamp.nanoseconds * 1e-9,
-                                                horizon=len(waypoints)))
-        self.get_logger().info(f"{method} plan of {len(waypoints)} points to "
-                               f"({goal[0]:.2f}, {goal[1]:.2f}) in {ms:.1f} ms{detail}")
-
-    def _follow(self, waypoints: np.ndarray, result: SparsePlan) -> int:
-        """The settle rule (``settle``, as ``HierarchicalPlanner``'s): the index of the waypoint
-        of the published ``waypoints`` (P, 2) [m] whose reach asks for the next re-plan: P - 1
-        (none) when every straight leg is free by the leg test on the map and the remembered
-        obstacles; for a plan toward a subgoal (``result``), the subgoal when every leg up to it
-        is; else 1 (Algorithm 1)."""
-        if not (self.params.settle and self._rules_on() and len(waypoints) > 2):
-            return 1
-        free = self._placer().leg_walls(waypoints) == 0  # (P - 1,)
-        if free.all():
-            return len(waypoints) - 1
-        if result is not None and result.first_leg == "subgoal":
-            at = np.flatnonzero(np.all(np.abs(waypoints - result.waypoints[-2]) < 1e-6, axis=1))
-            if len(at) and at[0] > 1 and free[:at[0]].all():
-                return int(at[0])
-        return 1
-
-    def _crosses_remembered(self, waypoints: np.ndarray) -> bool:
-        """Whether the straight legs of ``waypoints`` (P, 2) [m] sweep the footprint over an
-        obstacle the scans found and the memory still holds (the static map's walls are DD's
-        and polishing's business; a scanned blockage is not in what SD learnt)."""
-        return self.memory is not None and self.memory.crosses(waypoints, self.judged,
-                                                               self._now())
-
-    def _plan_fallback(self, start: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, float]:
-        """A* with the footprint's clearance round the remembered obstacles
-        (``ObstacleMemory.detour``), resampled -> (path (N, 2) [m], wall time [ms])."""
-        from ecahd_core.controller import resample
-
-        t0 = time.perf_counter()
-        now = self._now()
-        try:
-            path, tried = self.memory.detour(self.judged, start, goal, now)
-        except PlanningError as exc:
-            raise PlanningError(f"{exc}; the robot waits for a way to open") from None
-        path = resample(path, ASTAR_SPACING)
-        self.fallbacks += 1
-        self.get_logger().warning(
-            f"replan after {self.runner.blocked_count} blocked segment(s): fallback to A* on "
-            f"the map with {int(self.memory.mask(now).sum())} remembered obstacle cells, "
-            f"tried {tried} of 2 maps ({self.fallbacks} fallback(s) so far)")
-        return path, (time.perf_counter() - t0) * 1e3
-
-    def _plan_astar(self, start: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, float]:
-        """A* from ``start`` to ``goal`` -> (path (N, 2) [m], ASTAR_SPACING apart at most;
-        wall time [ms]). An unreachable goal or one without clearance is dropped."""
-        from ecahd_core.astar import plan_from_pose
-        from ecahd_core.controller import resample
-
-        t0 = time.perf_counter()
-        try:
-            path = plan_from_pose(self.astar, start, goal)
-        except PlanningError as exc:  # the pose was validated: the goal is the problem
-            self.runner.fail()
-            raise PlanningError(f"goal rejected: {exc}") from None
-        path = resample(path, ASTAR_SPACING)
-        return path, (time.perf_counter() - t0) * 1e3
+        self._plan_pub.publish(xy_to_path(out.waypoints, frame, stamp.to_msg()))
+        if out.sparse is not None:
+            self._cand_pub.publish(candidate_markers(out.sparse, frame, stamp.to_msg()))
+        self._timing_pub.publish(timing_message(out.method, out.ms, stamp.nanoseconds * 1e-9,
+                                                horizon=len(out.waypoints)))
+        goal = out.waypoints[-1]
+        line = (f"{out.method} plan of {len(out.waypoints)} points to ({goal[0]:.2f}, "
+                f"{goal[1]:.2f}) in {out.ms:.1f} ms{out.detail}")
+        if out.method == "fallback_astar":
+            self.get_logger().warning(line)
+        else:
+            self.get_logger().info(line)
 
 
 def main(args=None) -> None:

@@ -1,6 +1,6 @@
 """local_refiner: ECAHD's local stage as a node (paper Algorithm 1 lines 13-18, Algorithm 2) with a
 pure-pursuit controller that follows the result. A thin shell over
-:class:`ecahd_core.navigation.LocalRunner` (the online logic, unit-tested without ROS).
+:class:`ecahd_core.planning.local.LocalRunner` (the online logic, unit-tested without ROS).
 
 Each segment of the global plan (the first from the robot's pose when the plan arrived, then
 waypoint to waypoint) gets the straight local plan of P^l points, its collision cost c^l of J
@@ -77,11 +77,11 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from ecahd_core.collision_monitor import SLOWDOWN_PROFILES
 from ecahd_core.errors import EcahdError
-from ecahd_core.navigation import (LocalRunner, LocalRunnerConfig, SegmentResult,
-                                   judge_items)
-from ecahd_core.planner import DenseConfig
+from ecahd_core.planning.local import LocalRunner, LocalRunnerConfig, SegmentResult, judge_items
+from ecahd_core.planning.hierarchical import DenseConfig
 from ecahd_core.sensing import PoseHistory
 from ecahd_core.worker import LatestWorker
+from ecahd_ros.callbacks import check_frame, guard, now_seconds
 from ecahd_ros.conversions import (layout_to_msg, msg_to_grid, path_to_xy, timing_message,
                                    xy_to_path, yaw_from_quaternion)
 from ecahd_ros.params import (ParamSpec, collision_cost, declare_parameters, make_robot,
@@ -351,16 +351,16 @@ class LocalRefiner(Node):
         self._lock = threading.Lock()  # the runner is shared by the callback threads
         self._world_lock = threading.Lock()  # the local costmap: scan worker vs publisher
         # long work off the executor thread (ecahd_core.worker): maps, scan fusion
-        report = lambda exc: self.get_logger().error(str(exc))  # noqa: E731 (_guard logs)
-        self._map_worker = LatestWorker(self._guard(self._build_world), name="map",
+        report = lambda exc: self.get_logger().error(str(exc))  # noqa: E731 (guard logs)
+        self._map_worker = LatestWorker(guard(self, self._build_world), name="map",
                                         on_error=report, nice=p.worker_nice)
-        self._scan_worker = LatestWorker(self._guard(self._fuse_scan), name="scan",
+        self._scan_worker = LatestWorker(guard(self, self._fuse_scan), name="scan",
                                          on_error=report, nice=p.worker_nice)
         self.runner = LocalRunner(p.runner_config(), worker_nice=p.worker_nice)
         self._poses = PoseHistory(POSE_HISTORY)  # odometry by stamp, to place the scans
         self._pending_scan = None  # (Scan, monotonic time) waiting for its stamp's odometry
         self.world = None  # ecahd_core.sensing.LocalWorld once a map arrives (use_scan)
-        self.refiner = None  # ecahd_core.navigation.SegmentRefiner once a map arrives
+        self.refiner = None  # ecahd_core.planning.local.SegmentRefiner once a map arrives
         self.monitor = None
         if p.collision_monitor:
             from ecahd_core.collision_monitor import CollisionMonitor
@@ -378,22 +378,22 @@ class LocalRefiner(Node):
         self._costmap_pub = self.create_publisher(OccupancyGrid, "local_costmap", VIZ_QOS)
         inputs, maps = MutuallyExclusiveCallbackGroup(), MutuallyExclusiveCallbackGroup()
         control = MutuallyExclusiveCallbackGroup()
-        self.create_subscription(Path, "plan", self._guard(self._on_plan), PLAN_QOS,
+        self.create_subscription(Path, "plan", guard(self, self._on_plan), PLAN_QOS,
                                  callback_group=inputs)
-        self.create_subscription(Odometry, "odom", self._guard(self._on_odom), STREAM_QOS,
+        self.create_subscription(Odometry, "odom", guard(self, self._on_odom), STREAM_QOS,
                                  callback_group=inputs)
-        self.create_subscription(OccupancyGrid, "map", self._guard(self._on_map), MAP_QOS,
+        self.create_subscription(OccupancyGrid, "map", guard(self, self._on_map), MAP_QOS,
                                  callback_group=maps)
         # steady: the sim steps /clock by 1 / rate_hz (20 ms), so a 20 Hz timer on sim time
         # fires 40 or 60 ms apart; the robot's base wants commands evenly spaced
         clock = Clock(clock_type=ClockType.STEADY_TIME) if p.control_clock == "steady" else None
-        self._timer = self.create_timer(1.0 / p.control_rate, self._guard(self._on_control),
+        self._timer = self.create_timer(1.0 / p.control_rate, guard(self, self._on_control),
                                         callback_group=control, clock=clock)
         if p.use_scan:
             sensing = MutuallyExclusiveCallbackGroup()
-            self.create_subscription(LaserScan, "scan", self._guard(self._on_scan), SCAN_QOS,
+            self.create_subscription(LaserScan, "scan", guard(self, self._on_scan), SCAN_QOS,
                                      callback_group=sensing)
-            self.create_timer(1.0 / p.local_costmap_rate, self._guard(self._publish_costmap),
+            self.create_timer(1.0 / p.local_costmap_rate, guard(self, self._publish_costmap),
                               callback_group=sensing)
         on_parameter_change(self, PARAMETERS, lambda: self.params, self._apply_params)
         self._last_reason = None
@@ -410,21 +410,6 @@ class LocalRefiner(Node):
     def dd_calls(self) -> int:
         return self.runner.dd_calls
 
-    def _guard(self, callback):
-        """Wrap a callback so no exception escapes: the error is logged in one line (a bug
-        with its traceback) and the message dropped; the node keeps running."""
-        def wrapped(*args) -> None:
-            try:
-                callback(*args)
-            except EcahdError as exc:
-                self.get_logger().error(str(exc))
-            except Exception:  # noqa: BLE001 (a node must survive a bug in one message)
-                import traceback
-
-                self.get_logger().error(f"{callback.__name__} failed:\n"
-                                        f"{traceback.format_exc()}")
-        return wrapped
-
     def _apply_params(self, params: LocalRefinerParams) -> None:
         with self._lock:
             self.params = params
@@ -436,23 +421,21 @@ class LocalRefiner(Node):
         self.get_logger().info("parameters updated")
 
     def _now(self) -> float:
-        return self.get_clock().now().nanoseconds * 1e-9
+        return now_seconds(self)
 
     # ------------------------------------------------------------------------- callbacks
     def _on_map(self, msg: OccupancyGrid) -> None:
         """Validate the map here; build its cost J, DD and local costmap on the map worker
         (seconds on a 2000 x 2000 map: the control timer keeps its rate meanwhile)."""
         p = self.params
-        if msg.header.frame_id != p.global_frame:
-            raise EcahdError(f"map in frame {msg.header.frame_id!r} ignored: expected "
-                             f"{p.global_frame!r}")
+        check_frame(msg.header.frame_id, p.global_frame, "map")
         self._map_worker.submit(msg_to_grid(msg, name=p.map_name))
 
     def _build_world(self, grid) -> None:
         """(map worker) Everything the local stage needs on ``grid``, swapped in at once."""
         from ecahd_core.model_zoo import load_model
-        from ecahd_core.navigation import SegmentRefiner
-        from ecahd_core.planner import HierarchicalPlanner
+        from ecahd_core.planning.local import SegmentRefiner
+        from ecahd_core.planning.hierarchical import HierarchicalPlanner
 
         p = self.params
         ckpt = (load_model("dd", grid, path=p.dd_model or None, footprint=self.footprint)
@@ -483,9 +466,7 @@ class LocalRefiner(Node):
 
     def _on_plan(self, msg: Path) -> None:
         p = self.params
-        if msg.header.frame_id != p.global_frame:
-            raise EcahdError(f"plan in frame {msg.header.frame_id!r} ignored: expected "
-                             f"{p.global_frame!r}")
+        check_frame(msg.header.frame_id, p.global_frame, "plan")
         xy = path_to_xy(msg)
         with self._lock:
             if len(xy) == 0:
@@ -497,9 +478,8 @@ class LocalRefiner(Node):
                 raise EcahdError(f"plan ignored: {exc}") from None
 
     def _on_odom(self, msg: Odometry) -> None:
-        if msg.header.frame_id and msg.header.frame_id != self.params.global_frame:
-            raise EcahdError(f"odometry in frame {msg.header.frame_id!r} ignored: expected "
-                             f"{self.params.global_frame!r}")
+        if msg.header.frame_id:
+            check_frame(msg.header.frame_id, self.params.global_frame, "odometry")
         pose = msg.pose.pose
         xyyaw = (pose.position.x, pose.position.y, yaw_from_quaternion(pose.orientation))
         with self._lock:

@@ -450,7 +450,7 @@ STALL_RATE = 10.0  # [Hz] control_rate
 def test_a_stalled_local_stage_never_stops_cmd_vel(ros_context, monkeypatch):
     """The refiner's local stage (J check; DD off to skip loading it) sleeps STALL s: cmd_vel
     keeps coming at control_rate, zero until the refined segment is ready, then driving."""
-    from ecahd_core.planner import HierarchicalPlanner
+    from ecahd_core.planning.hierarchical import HierarchicalPlanner
     from ecahd_ros.local_refiner import LocalRefiner
 
     original = HierarchicalPlanner.local_stage
@@ -800,7 +800,7 @@ def test_a_burst_of_goals_is_coalesced(ros_context):
     """global_planner (wall time, SD made SLOW_PLAN s slower) spun as spin_node spins it; 40
     goals in 0.4 s arrive while its first plan runs: it plans the first and then the last
     (not every goal still queued), and the last within 3 plan times of being sent."""
-    from ecahd_core.planner import SparseDiffusion
+    from ecahd_core.planning.sparse import SparseDiffusion
     from ecahd_ros.global_planner import GlobalPlanner
 
     original = SparseDiffusion.plan

@@ -195,8 +195,9 @@ def test_warm_fraction_starts_a_waypoint_replan_from_the_rest_of_the_plan(rig):
     r = rig(num_candidates=4, warm_fraction=0.3)
     ready(r)
     warm = []  # each SD plan's warm start (None: from noise)
-    original = r.planner.sparse.plan
-    r.planner.sparse.plan = lambda *a, **k: warm.append(k.get("warm_start")) or original(*a, **k)
+    sd = r.planner.planning.stage.sd
+    original = sd.plan
+    sd.plan = lambda *a, **k: warm.append(k.get("warm_start")) or original(*a, **k)
     r.send_goal(GOAL)
     r.spin_until(lambda: r.plans)
     xy = path_to_xy(r.plans[-1])
@@ -214,28 +215,27 @@ def test_warm_fraction_starts_a_waypoint_replan_from_the_rest_of_the_plan(rig):
 def test_the_free_first_leg_rule_acts_where_the_robot_follows_only_the_first_leg(
         rig, place_reach, replan, want):
     """With placement on and re-plans at each waypoint, SD judges candidates' first legs with
-    the node's placer (map + remembered obstacles; SparseConfig.leg_batches); the published plan
-    still gets the placer over all its legs."""
+    the node's placer (SparseConfig.leg_batches; the gate is SparseStage.leg_rule, the offline
+    planner's own), and only the first leg of a re-plan is repaired (the robot follows it)."""
     r = rig(num_candidates=4, place_reach=place_reach, replan=replan)
     ready(r)
     seen = []
-    original = r.planner.sparse.plan
+    stage = r.planner.planning.stage
+    original = stage.sd.plan
 
     def spy(*a, **k):
-        seen.append((k.get("repair_legs"), r.planner.sparse.placer))
+        seen.append(k.get("repair_legs"))
         return original(*a, **k)
 
-    r.planner.sparse.plan = spy
+    stage.sd.plan = spy
     r.send_goal(GOAL)
     r.spin_until(lambda: r.plans)
-    legs, placer = seen[-1]
-    assert (legs == 1) == want and (placer is not None) == want
-    if want:
-        assert placer is r.planner._placer()
-    assert r.planner.sparse.placer is None  # only for the call
+    assert stage.leg_rule() == want
+    assert (seen[-1] == 1) == (replan == "every_waypoint")
+    assert (stage.sd.placer is not None) == (place_reach > 0)
     from ecahd_core.placement import LEG_BATCHES
 
-    assert r.planner.sparse.config.leg_batches == LEG_BATCHES  # the parameter's default
+    assert stage.sd.config.leg_batches == LEG_BATCHES  # the parameter's default
 
 
 def test_same_seed_reproduces_the_plan(rig):
@@ -340,21 +340,20 @@ def test_astar_from_a_pose_without_clearance_and_an_unreachable_goal(rig):
 def test_replan_spacing_is_decided_by_the_map_and_the_model():
     from types import SimpleNamespace
 
-    from ecahd_core.navigation import REPLAN_SPACING
+    from ecahd_core.planning.horizon import REPLAN_SPACING
 
     values = {spec.name: spec.default for spec in PARAMETERS}  # -1: by the map
-    params = GlobalPlannerParams(**values)
+    config = GlobalPlannerParams(**values).online_config()
     big, small = SimpleNamespace(width=1000, height=1667), SimpleNamespace(width=120, height=90)
-    assert params.runner_config(big).replan_spacing == REPLAN_SPACING  # a building
+    assert config.spacing_on(big) == REPLAN_SPACING  # a building
     # the SD model's expert spacing where it is wider (an office's 6.5 m), never below 3 m
-    assert params.runner_config(big, 6.5).replan_spacing == 6.5
-    assert params.runner_config(big, 2.6).replan_spacing == REPLAN_SPACING
-    assert params.runner_config(small).replan_spacing is None  # maze2d-large: the paper's
-    assert params.runner_config(small, 6.5).replan_spacing is None
-    assert params.runner_config().replan_spacing is None  # no map yet
+    assert config.spacing_on(big, 6.5) == 6.5
+    assert config.spacing_on(big, 2.6) == REPLAN_SPACING
+    assert config.spacing_on(small) is None  # maze2d-large: the paper's
+    assert config.spacing_on(small, 6.5) is None
     for value, want in ((0.0, None), (2.5, 2.5)):
         values["replan_spacing"] = value
-        assert GlobalPlannerParams(**values).runner_config(big, 6.5).replan_spacing == want
+        assert GlobalPlannerParams(**values).online_config().spacing_on(big, 6.5) == want
 
 
 def test_cost_margin_is_decided_by_the_map_unless_set():
@@ -425,14 +424,14 @@ def test_a_blockage_the_refiner_scanned_is_avoided_by_the_fallback(rig):
     window = layout_to_msg(OccupancyGridLayout(data=data.reshape(-1), width=20, height=20,
                                                resolution=0.1, origin_xy=(2.5, 4.5)))
     r._matched(costmap_pub, window)
-    r.spin_until(lambda: r.planner.memory is not None
-                 and r.planner.memory.mask(r.planner._now()).any())
+    r.spin_until(lambda: r.planner.planning.memory is not None
+                 and r.planner.planning.memory.mask(r.planner._now()).any())
     n = len(r.plans)
     r._matched(replan_pub, String(data=json.dumps({"reason": "blocked"})))
     r.spin_until(lambda: len(r.plans) > n)
     r.spin_until(lambda: any(json.loads(m.data)["stage"] == "fallback_astar"
                              for m in r.timings))  # its record follows the plan
-    assert r.planner.fallbacks == 1
+    assert r.planner.planning.fallbacks == 1
     path = path_to_xy(r.plans[-1])
     assert np.allclose(path[0], start) and np.allclose(path[-1], goal)
     assert np.abs(path[:, 1] - 5.5).max() > 1.0  # round the block through another corridor
@@ -456,16 +455,17 @@ def straight_goal(grid, placer, start, rng_seed=0):
 def test_a_plan_whose_legs_are_all_free_is_followed_whole_when_settle_is_on(rig, settle):
     """The settle rule (replan spacing and placement on): a plan whose every straight leg is
     free by the leg test is followed whole: reaching its next waypoint asks for no re-plan."""
-    from ecahd_core.planner import SparsePlan
+    from ecahd_core.planning.sparse import SparsePlan
 
     r = rig(num_candidates=4, place_reach=1.0, replan_spacing=3.0, settle=settle)
     ready(r)
     start = np.array(CORRIDOR)
     r.send_odom(start)
     r.spin_until(lambda: np.allclose(r.planner.pose, start))
-    goal = straight_goal(r.planner.grid, r.planner._placer(), start)
+    stage = r.planner.planning.stage
+    goal = straight_goal(r.planner.planning.grid, stage.sd.placer, start)
     wp = np.linspace(start, goal, 4)
-    r.planner.sparse.replan = lambda *a, **k: SparsePlan(
+    stage.sd.replan = lambda *a, **k: SparsePlan(
         waypoints=wp.copy(), candidates=wp[None], best=0, collision_costs=None, time_ms=0.0)
     r.send_goal(goal)
     r.spin_until(lambda: r.plans)
@@ -479,44 +479,53 @@ def test_a_plan_whose_legs_are_all_free_is_followed_whole_when_settle_is_on(rig,
 
 
 def test_the_subgoal_rule_is_built_with_the_map_and_acts_past_p_g_minus_one_waypoints(rig):
-    from ecahd_core.navigation import PlanRequest
+    from ecahd_core.planning.online import PlanRequest
 
-    assert rig(num_candidates=4, place_reach=1.0, replan_spacing=0.0).planner.subgoal_rule \
+    assert rig(num_candidates=4, place_reach=1.0, replan_spacing=0.0).planner.planning.stage \
         is None  # before a map, and
     off = rig(num_candidates=4, place_reach=1.0, replan_spacing=0.0)
     ready(off)
-    assert off.planner.subgoal_rule is None  # without a replan spacing (the paper's setting)
+    # without a replan spacing (the paper's setting)
+    assert not off.planner.planning.stage.subgoaling()
+    assert off.planner.planning.stage._subgoal_rule is None
     r = rig(num_candidates=4, place_reach=1.0, replan_spacing=3.0, horizon=10)
     ready(r)
-    rule = r.planner.subgoal_rule
+    rule = r.planner.planning.stage._subgoal_rule
     assert rule is not None and rule.field._graph is not None  # its graph built with the map
     seen = []
     real = rule.apply
     rule.apply = lambda sd, s, g, plan, it, **k: seen.append(it) or real(sd, s, g, plan, it, **k)
     r.planner.runner.set_goal(GOAL)
     for it in (8, 9, 12):
-        r.planner._plan(PlanRequest(np.array(ROBOT), np.array(GOAL), 10, "waypoint", it))
+        r.planner.planning._plan(PlanRequest(np.array(ROBOT), np.array(GOAL), 10, "waypoint",
+                                             it))
     assert seen == [9, 12]
-    r.spin_until(lambda: r.plans)  # each published (the plan topic keeps the last)
-    assert r.planner.sparse.placer is None  # the fused placer only for the call
 
 
 def test_a_plan_toward_a_subgoal_is_followed_to_the_subgoal_when_its_legs_there_are_free(rig):
+    """The settle rule's follow index (SparseStage.step, the offline planner's own) as the node
+    builds it: to the subgoal when its legs there are free, whole when every leg is, else 1."""
     from dataclasses import replace
 
-    from ecahd_core.planner import SparsePlan
+    from ecahd_core.planning.sparse import SparsePlan
 
     r = rig(num_candidates=4, place_reach=1.0, replan_spacing=3.0)
     ready(r)
-    placer, start = r.planner._placer(), np.array(CORRIDOR)
-    sub = straight_goal(r.planner.grid, placer, start)
+    stage = r.planner.planning.stage
+    placer, start = stage.sd.placer, np.array(CORRIDOR)
+    sub = straight_goal(r.planner.planning.grid, placer, start)
     far = np.array(ROBOT)  # no straight free leg from the corridor's far end to here
     assert placer.wall_length(sub, far[None])[0] > 0
     wp = np.stack([start, 0.5 * (start + sub), sub, far])
     plan = SparsePlan(waypoints=wp, candidates=wp[None], best=0, collision_costs=None,
                       time_ms=0.0, first_leg="subgoal")
-    assert r.planner._follow(wp, plan) == 2  # to the subgoal, then a re-plan
-    assert r.planner._follow(wp, replace(plan, first_leg="")) == 1  # Algorithm 1
-    assert r.planner._follow(wp[:3], plan) == 2  # every leg free: the whole plan
-    r.planner.params = replace(r.planner.params, settle=False)
-    assert r.planner._follow(wp[:3], plan) == 1
+
+    def follow(sparse):
+        stage.sd.replan = lambda *a, **k: sparse
+        return stage.step(start, sparse.waypoints[-1], iteration=0).follow
+
+    assert follow(plan) == 2  # to the subgoal, then a re-plan
+    assert follow(replace(plan, first_leg="")) == 1  # Algorithm 1
+    assert follow(replace(plan, waypoints=wp[:3])) == 2  # every leg free: the whole plan
+    stage.settle = False
+    assert follow(replace(plan, waypoints=wp[:3])) == 1

@@ -150,7 +150,7 @@ def test_colliding_segment_is_refined_by_dd(rig):
 
 
 def test_dd_disabled_follows_the_straight_plan_and_never_runs_dd(rig, monkeypatch):
-    from ecahd_core.planner import HierarchicalPlanner
+    from ecahd_core.planning.hierarchical import HierarchicalPlanner
 
     def no_dd(*args, **kwargs):
         raise AssertionError("DD ran with dd_enabled false")

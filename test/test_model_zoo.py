@@ -7,7 +7,7 @@ from ecahd_core.errors import CheckpointError, EcahdError
 from ecahd_core.footprint import make_footprint
 from ecahd_core.maps import builtin_map
 from ecahd_core.model_zoo import RECIPES, load_model, model_meta, training_arrays
-from ecahd_core.planner import select_best
+from ecahd_core.planning.sparse import select_best
 from ecahd_ros.cli import main
 
 
@@ -58,7 +58,7 @@ def test_meta_records_identity(umaze_data):
 
 
 def test_sd_reads_its_expert_spacing(tiny_sd):
-    from ecahd_core.planner import SparseDiffusion
+    from ecahd_core.planning.sparse import SparseDiffusion
 
     out, _ = tiny_sd
     ckpt = load_model("sd", builtin_map("maze2d-umaze"), path=out)

@@ -1,4 +1,4 @@
-"""The online Algorithm 1 runtimes (ecahd_core.navigation) driven by fake clocks and poses: no
+"""The online Algorithm 1 runtimes (ecahd_core.planning.online and .local) driven by fake clocks and poses: no
 ROS, no models (a fake refine function), so each rule is pinned on its own."""
 import math
 import threading
@@ -10,9 +10,10 @@ import pytest
 
 from ecahd_core.controller import PathTracker
 from ecahd_core.errors import EcahdError, PlanningError
-from ecahd_core.navigation import (MAX_PLAN_POINTS, GlobalRunner, GlobalRunnerConfig,
-                                   LocalRunner, LocalRunnerConfig, PlanRequest, SegmentResult,
-                                   replan_horizon, simplify, validate_plan)
+from ecahd_core.planning.horizon import replan_horizon
+from ecahd_core.planning.local import LocalRunner, LocalRunnerConfig, SegmentResult
+from ecahd_core.planning.online import GlobalRunner, GlobalRunnerConfig, PlanRequest
+from ecahd_core.validation import MAX_PLAN_POINTS, simplify, validate_plan
 
 PLAN = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [2.0, 1.0]])
 
@@ -45,7 +46,7 @@ def test_replan_horizon_shrinks_with_the_distance_left_when_spaced():
 def test_replan_spacing_by_the_map_and_the_model():
     from types import SimpleNamespace
 
-    from ecahd_core.navigation import REPLAN_SPACING, auto_replan_spacing, replan_spacing_for
+    from ecahd_core.planning.horizon import REPLAN_SPACING, auto_replan_spacing, replan_spacing_for
 
     big, small = SimpleNamespace(width=1000, height=1667), SimpleNamespace(width=120, height=90)
     assert auto_replan_spacing(small, 6.5) is None  # maze2d-large: Algorithm 1's rule
@@ -157,7 +158,7 @@ def test_a_settled_plan_is_followed_whole_and_still_replans_on_a_timeout_or_a_bl
 def test_progress_toward_the_next_waypoint_holds_off_the_timeout():
     # a long leg driven at walking pace reaches no waypoint for longer than the timeout, but
     # every PROGRESS_STEP nearer the next waypoint restarts its clock; standing still does not
-    from ecahd_core.navigation import PROGRESS_STEP
+    from ecahd_core.planning.online import PROGRESS_STEP
 
     r = GlobalRunner(GlobalRunnerConfig(replan_timeout=2.0))
     r.set_goal((12.0, 0.0))
@@ -416,7 +417,7 @@ def two_corridor_map():
 def test_a_scanned_blockage_sends_the_detour_through_the_other_corridor():
     from ecahd_core.cost import CollisionCost
     from ecahd_core.footprint import make_footprint
-    from ecahd_core.navigation import detour
+    from ecahd_core.planning.detour import detour
     from ecahd_core.sensing import LocalWorld, ObstacleMemory, Scan
 
     grid, robot = two_corridor_map(), make_footprint("circle")
@@ -480,7 +481,7 @@ def test_detour_searches_near_first_and_falls_back_to_the_whole_map():
     from ecahd_core.collision import check_collision
     from ecahd_core.footprint import make_footprint
     from ecahd_core.maps import GridMap
-    from ecahd_core.navigation import detour
+    from ecahd_core.planning.detour import detour
 
     data = two_corridor_map().data.copy()
     data[:15, 30] = 100  # the bottom corridor closed wall to wall at x = 3
@@ -606,7 +607,7 @@ def test_detour_on_a_big_grid_is_coarse_and_near_the_exact_one(small_office):
     from ecahd_core.astar import COARSE_ABOVE_CELLS, path_length
     from ecahd_core.collision import check_collision
     from ecahd_core.footprint import make_footprint
-    from ecahd_core.navigation import detour
+    from ecahd_core.planning.detour import detour
     from ecahd_core.sensing import ObstacleMemory
 
     grid, robot = small_office.grid, make_footprint("circle")

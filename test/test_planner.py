@@ -9,7 +9,8 @@ from ecahd_core.errors import EcahdError
 from ecahd_core.footprint import make_footprint
 from ecahd_core.maps import builtin_map
 from ecahd_core.model_zoo import load_model
-from ecahd_core.planner import DenseConfig, HierarchicalPlanner, SparseConfig, SparseDiffusion
+from ecahd_core.planning.hierarchical import DenseConfig, HierarchicalPlanner
+from ecahd_core.planning.sparse import SparseConfig, SparseDiffusion
 
 GRID = builtin_map("maze2d-large")
 
@@ -60,9 +61,9 @@ def test_out_of_iterations_the_last_sd_plan_is_followed_whole(monkeypatch):
     # a replan spacing of 0.1 m keeps every re-plan at the full horizon; with no extra
     # iterations allowed, iteration P^g - 2 is the last SD call, and its plan is followed to the
     # goal leg by leg instead of one straight leg through the maze's walls
-    import ecahd_core.planner as planner_module
+    import ecahd_core.planning.rules as rules_module
 
-    monkeypatch.setattr(planner_module, "MAX_EXTRA_ITERATIONS", 0)
+    monkeypatch.setattr(rules_module, "MAX_EXTRA_ITERATIONS", 0)
     start, goal = np.array([1.5, 1.5]), np.array([10.5, 7.5])
     planner = make_planner(replan_spacing=0.1)
     plan = planner.plan(start, goal, generator=torch.Generator().manual_seed(0))
@@ -370,7 +371,7 @@ def test_local_plans_have_the_points_the_dd_checkpoint_learnt(tmp_path):
 def test_dd_guidance_weight_follows_the_cost_map_margin():
     """omega is chosen at the 0.1 m margin; on a wider one (a building's 0.5 m) DD is guided by
     omega x 0.1 / margin, so the paper's tables keep 0.03."""
-    from ecahd_core.planner import guidance_weight_for
+    from ecahd_core.planning.hierarchical import guidance_weight_for
 
     fp = make_footprint("circle")
     sd = SparseDiffusion(load_model("sd", GRID, footprint=fp), SparseConfig(num_candidates=4))
@@ -462,7 +463,7 @@ def scripted_sd(batches, *, leg_batches=3, num_candidates=4):
 
 
 def test_rank_candidates_starts_with_the_rules_choice_and_lists_every_candidate():
-    from ecahd_core.planner import rank_candidates, select_best
+    from ecahd_core.planning.sparse import rank_candidates, select_best
 
     rng = np.random.default_rng(0)
     cands = rng.uniform(0, 10, (6, 4, 2))

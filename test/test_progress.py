@@ -8,7 +8,8 @@ from ecahd_core.footprint import make_footprint
 from ecahd_core.maps import GridMap, builtin_map
 from ecahd_core.model_zoo import load_model
 from ecahd_core.placement import WaypointPlacer
-from ecahd_core.planner import HierarchicalPlanner, SparseConfig, SparseDiffusion, SparsePlan
+from ecahd_core.planning.hierarchical import HierarchicalPlanner
+from ecahd_core.planning.sparse import SparseConfig, SparseDiffusion, SparsePlan
 from ecahd_core.progress import SUBGOAL_GAIN, GoalField
 
 
@@ -71,9 +72,9 @@ def test_the_subgoal_rule_replaces_a_first_leg_that_makes_no_progress_by_one_tha
     grid, fp = builtin_map("maze2d-large"), make_footprint("circle")
     planner = maze_planner
     hd = planner(replan_spacing=3.0)
-    assert hd._subgoaling
-    assert not planner(replan_spacing=3.0, subgoals=False)._subgoaling
-    assert not planner()._subgoaling  # Algorithm 1's horizon: no extra iterations
+    assert hd.stage.subgoaling()
+    assert not planner(replan_spacing=3.0, subgoals=False).stage.subgoaling()
+    assert not planner().stage.subgoaling()  # Algorithm 1's horizon: no extra iterations
     # a start and a goal either side of a wall, the route round it much longer than straight
     field = GoalField(grid, fp)
     free = np.argwhere(field.graph.labels >= 0)
@@ -91,7 +92,8 @@ def test_the_subgoal_rule_replaces_a_first_leg_that_makes_no_progress_by_one_tha
                           best=0, collision_costs=None, time_ms=0.0)
     gen = torch.Generator().manual_seed(0)
     times = {}
-    out = hd._toward_subgoal(S, G, straight, 20, times, gen)
+    rule = hd.stage.subgoal_rule()
+    out = rule.apply(hd.sparse, S, G, straight, 20, generator=gen, times=times)
     assert out.first_leg == "subgoal" and "goal_field" in times
     w = out.waypoints
     assert np.allclose(w[0], S) and np.allclose(w[-1], G)
@@ -99,7 +101,7 @@ def test_the_subgoal_rule_replaces_a_first_leg_that_makes_no_progress_by_one_tha
     to_go = field.to(G)
     assert to_go(w[1:2])[0] < to_go(S[None])[0] - SUBGOAL_GAIN
     # a plan whose first leg already makes progress stays as it is
-    assert hd._toward_subgoal(S, G, out, 20, times, gen) is out
+    assert rule.apply(hd.sparse, S, G, out, 20, generator=gen, times=times) is out
 
 
 
@@ -111,7 +113,7 @@ def test_the_settle_rule_follows_a_plan_whose_legs_are_free_whole_and_only_then(
 
     grid = builtin_map("maze2d-large")
     on, off = maze_planner(replan_spacing=3.0), maze_planner(replan_spacing=3.0, settle=False)
-    assert maze_planner().settle  # on by default, but it needs a replan spacing (the end)
+    assert maze_planner().stage.settle  # on by default, but it needs a replan spacing (the end)
     calls = []
     for hd in (on, off):
         real = hd.sparse.replan

@@ -56,7 +56,7 @@ def test_worker_threads_run_at_a_lower_priority_than_the_caller():
     import pytest
 
     from ecahd_core.errors import EcahdError
-    from ecahd_core.navigation import LocalRunner, LocalRunnerConfig
+    from ecahd_core.planning.local import LocalRunner, LocalRunnerConfig
     from ecahd_core.threads import lower_priority
 
     before = _own_nice()

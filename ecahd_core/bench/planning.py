@@ -210,10 +210,12 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
     from ecahd_core.footprint import make_footprint
     from ecahd_core.maps import load_map
     from ecahd_core.model_zoo import load_model
-    from ecahd_core.navigation import replan_spacing_for
+    from ecahd_core.planning.horizon import replan_spacing_for
     from ecahd_core.placement import auto_reach, placer_for
-    from ecahd_core.planner import (DenseConfig, FullDiffusion, HierarchicalPlanner, SparseConfig,
-                                    SparseDiffusion, guidance_weight_for)
+    from ecahd_core.planning.full import FullDiffusion
+    from ecahd_core.planning.hierarchical import (DenseConfig, HierarchicalPlanner,
+                                                  guidance_weight_for)
+    from ecahd_core.planning.sparse import SparseConfig, SparseDiffusion
     from ecahd_core.problems import make_problems
     from ecahd_core.safety import SafetyNet, SafetyNetConfig
 

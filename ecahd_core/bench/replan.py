@@ -166,7 +166,7 @@ def _median_ms(fn, repeats: int) -> tuple[float, object]:
 
 def _timed_detour(grid, footprint, start, goal, coarse: bool, repeats: int):
     """(median ms, path or None when there is no way)."""
-    from ecahd_core.navigation import detour
+    from ecahd_core.planning.detour import detour
 
     def run():
         try:

@@ -107,7 +107,7 @@ def run_sampling_benchmark(settings: SamplingBenchSettings, *, models: dict | No
     sd_ms = sd_pair["fp32"]
 
     # Algorithm 1's first re-plan with the planner's selection: from noise vs warm-started
-    from ecahd_core.planner import SparseConfig, SparseDiffusion
+    from ecahd_core.planning.sparse import SparseConfig, SparseDiffusion
 
     cost = (costmap, torch.as_tensor(footprint.points, dtype=torch.float32), cost_config)
     planners = {"noise": SparseDiffusion(ckpt["sd"], SparseConfig(selection="collision_aware"),

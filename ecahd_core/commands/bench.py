@@ -147,7 +147,7 @@ def _run_sd_quality(args: argparse.Namespace) -> int:
     grid = load_map(args.map)
     ckpt = load_model("sd", grid, path=args.sd, horizon=10)
     problems = make_problems(grid, args.problems, seed=args.seed)
-    from ecahd_core.planner import SparseConfig
+    from ecahd_core.planning.sparse import SparseConfig
 
     steps = args.steps or sample_steps(ckpt)
     eta = SparseConfig().eta if args.eta is None else args.eta
@@ -173,7 +173,7 @@ def _run_sd_quality(args: argparse.Namespace) -> int:
 # -------------------------------------------------------------------------------- planning
 def _add_planning_arguments(parser: argparse.ArgumentParser) -> None:
     from ecahd_core.bench.planning import GUIDANCE_RUNS, METHODS, ROBOTS, PlanningBenchSettings
-    from ecahd_core.planner import SELECTION_RULES
+    from ecahd_core.planning.sparse import SELECTION_RULES
 
     d = PlanningBenchSettings()
     parser.add_argument("--map", default=d.map, help="built-in maze or Nav2 map YAML")

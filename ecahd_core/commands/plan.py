@@ -42,7 +42,7 @@ def add_replan_argument(p: argparse.ArgumentParser, default: str = "every_waypoi
     """``--replan``, ``--warm-fraction`` and ``--replan-spacing``: HD / ECAHD's SD policy
     (HierarchicalPlanner's ``replan`` and ``replan_spacing``, SparseConfig's ``warm_fraction``),
     one definition for ``ecahd plan`` and ``ecahd bench planning``."""
-    from ecahd_core.planner import REPLAN_POLICIES
+    from ecahd_core.planning.horizon import REPLAN_POLICIES
 
     p.add_argument("--replan", default=default, choices=REPLAN_POLICIES,
                    help="HD: SD best-of-N at every waypoint (Algorithm 1) or once")
@@ -242,10 +242,11 @@ def _plan_diffusion(args, grid, footprint, start, goal):
     from ecahd_core.collision import densify, exact_check_for
     from ecahd_core.cost import CollisionCost
     from ecahd_core.model_zoo import load_model
-    from ecahd_core.navigation import replan_spacing_for
+    from ecahd_core.planning.horizon import replan_spacing_for
     from ecahd_core.placement import placer_for
-    from ecahd_core.planner import (DenseConfig, FullDiffusion, HierarchicalPlanner, SparseConfig,
-                                    SparseDiffusion)
+    from ecahd_core.planning.full import FullDiffusion
+    from ecahd_core.planning.hierarchical import DenseConfig, HierarchicalPlanner
+    from ecahd_core.planning.sparse import SparseConfig, SparseDiffusion
 
     polish = {} if args.polish_steps is None else {"polish_steps": args.polish_steps}
     polish["keep_better"] = not args.no_keep_better

@@ -1,0 +1,186 @@
+"""One iteration's global plan of Algorithm 1 (paper Sec. III-A, lines 2-12) with our rules round
+Sparse Diffusion, as one object: :class:`SparseStage`. The offline planner
+(:class:`~ecahd_core.planning.hierarchical.HierarchicalPlanner`, behind ``ecahd plan`` and the
+planning benchmarks) and the online one (:class:`~ecahd_core.planning.online.OnlinePlanner`,
+behind global_planner) both call :meth:`SparseStage.step` for every SD plan, so what the
+benchmarks measure is what the robot runs.
+
+The rules (ours, beyond the paper), each with its one gate here:
+
+- **free first leg** (:meth:`SparseStage.leg_rule`; ``SparseConfig.leg_batches``): a re-plan
+  whose caller follows only its first leg (every_waypoint) takes another candidate, or a further
+  batch, when the selected one's first leg crosses a wall after placement and leg repair. Needs
+  the SD's ``placer`` (building maps) and acts with cold re-plans only (a warm start repairs
+  every leg instead).
+- **subgoal** (:meth:`SparseStage.subgoaling`; :class:`~ecahd_core.progress.SubgoalRule`): a
+  re-plan beyond Algorithm 1's P^g - 1 iterations whose first leg makes no progress by the
+  goal's cost-to-go plans toward a point on the shortest route.
+- **settle** (:meth:`SparseStage.settling`): a plan whose every straight leg is free by the
+  placer's leg test is followed whole (no re-plan at its waypoints); a plan toward a subgoal
+  whose legs up to it are free is followed to the subgoal.
+- **forced last plan** (:data:`~ecahd_core.planning.horizon.MAX_EXTRA_ITERATIONS`): a re-plan
+  loop that has run that many iterations beyond P^g - 2 follows its last SD plan whole.
+
+The subgoal and settle rules act where re-plans have a replan spacing and the free-first-leg
+rule is on: building maps by default (maze2d-large keeps the paper's Algorithm 1).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ecahd_core.errors import EcahdError
+from ecahd_core.planning.horizon import (MAX_EXTRA_ITERATIONS, REPLAN_POLICIES,
+                                         check_replan_spacing, replan_horizon)
+from ecahd_core.planning.sparse import SparseDiffusion, SparsePlan
+
+
+@dataclass(frozen=True)
+class GlobalStep:
+    """One iteration's global plan (:meth:`SparseStage.step`).
+
+    Attributes:
+        sparse: SD's plan after the rules (its ``first_leg`` says what the free-first-leg and
+            subgoal rules did).
+        waypoints: (P, 2) [m] the plan to follow, ``sparse.waypoints``.
+        follow: index of the waypoint whose reach asks for the next re-plan: 1 is Algorithm 1
+            (re-plan at the next waypoint), P - 1 follows the whole plan (the policy "once", the
+            settle rule, a forced last plan), in between a plan followed to its subgoal.
+        settled: the settle rule accepted the whole plan.
+        forced: the loop ran out of iterations and follows this plan whole.
+    """
+
+    sparse: SparsePlan
+    waypoints: np.ndarray
+    follow: int
+    settled: bool = False
+    forced: bool = False
+
+
+class SparseStage:
+    """Algorithm 1's SD call of one iteration with every rule round it (see the module docstring).
+
+    Args:
+        sd: the SparseDiffusion, on the static map (its ``placer`` and ``cost``); a caller that
+            knows more (obstacles the scans found) passes a view of it
+            (:meth:`SparseDiffusion.on`) to :meth:`step`.
+        replan: "every_waypoint" (Algorithm 1) or "once" (one SD plan per goal, ours).
+        replan_spacing: [m] every_waypoint: re-plans keep a waypoint per this many metres left to
+            the goal (:func:`~ecahd_core.planning.horizon.replan_horizon`); None: P^g - p.
+        subgoals: the subgoal rule (on where its gate allows).
+        settle: the settle rule (on where its gate allows).
+    """
+
+    def __init__(self, sd: SparseDiffusion, *, replan: str = "every_waypoint",
+                 replan_spacing: float | None = None, subgoals: bool = True,
+                 settle: bool = True) -> None:
+        if replan not in REPLAN_POLICIES:
+            raise EcahdError(f"replan policy {replan!r} is not one of {list(REPLAN_POLICIES)}")
+        self.sd = sd
+        self.replan = replan
+        self.replan_spacing = check_replan_spacing(replan_spacing)
+        self.subgoals = bool(subgoals)
+        self.settle = bool(settle)
+        self._subgoal_rule = None  # progress.SubgoalRule on the static placer's map, built once
+
+    # ------------------------------------------------------------------------------- gates
+    @property
+    def every_waypoint(self) -> bool:
+        return self.replan == "every_waypoint"
+
+    def leg_rule(self, sd: SparseDiffusion | None = None) -> bool:
+        """Whether SD's free-first-leg rule acts: every_waypoint, cold re-plans, a placer and
+        ``leg_batches`` >= 0 (``sd``: the view planned with; None: the static one)."""
+        sd = sd or self.sd
+        return (self.every_waypoint and sd.placer is not None and sd.config.leg_batches >= 0
+                and sd.config.warm_fraction == 0)
+
+    def subgoaling(self, sd: SparseDiffusion | None = None) -> bool:
+        """Whether the subgoal rule acts: ``subgoals``, a replan spacing, the free-first-leg
+        rule."""
+        return self.subgoals and self.replan_spacing is not None and self.leg_rule(sd)
+
+    def settling(self, sd: SparseDiffusion | None = None) -> bool:
+        """Whether the settle rule acts: ``settle``, every_waypoint, a replan spacing, a placer
+        and ``leg_batches`` >= 0 (warm re-plans too: they repair every leg)."""
+        sd = sd or self.sd
+        return (self.settle and self.every_waypoint and self.replan_spacing is not None
+                and sd.placer is not None and sd.config.leg_batches >= 0)
+
+    def legs_free(self, waypoints: np.ndarray, sd: SparseDiffusion | None = None) -> bool:
+        """The settle rule's test: every straight leg of ``waypoints`` (P, 2) [m] is free by the
+        placer's leg test (``WaypointPlacer.leg_walls``); False where the rule is off."""
+        sd = sd or self.sd
+        return self.settling(sd) and not sd.placer.leg_walls(waypoints).any()
+
+    def forced(self, iteration: int) -> bool:
+        """Whether iteration ``iteration`` (p) is the forced last plan (MAX_EXTRA_ITERATIONS
+        beyond P^g - 2, every_waypoint)."""
+        return self.every_waypoint and iteration >= self.sd.config.horizon - 2 + \
+            MAX_EXTRA_ITERATIONS
+
+    # -------------------------------------------------------------------------------- step
+    def subgoal_rule(self):
+        """The SubgoalRule on the static placer's map and footprint (built on first use; call
+        it when a map arrives so the cost-to-go's graph is not built during a re-plan)."""
+        if self._subgoal_rule is None:
+            from ecahd_core.progress import SubgoalRule
+
+            placer = self.sd.placer
+            self._subgoal_rule = SubgoalRule(placer.grid, placer.footprint, self.replan_spacing)
+        return self._subgoal_rule
+
+    def horizon(self, iteration: int, start, goal) -> int:
+        """The horizon of iteration ``iteration``'s plan from ``start`` to ``goal`` ((2,) [m]):
+        P^g for a goal's first plan and under "once", else
+        :func:`~ecahd_core.planning.horizon.replan_horizon`."""
+        P_g = self.sd.config.horizon
+        if not self.every_waypoint:
+            return P_g
+        return replan_horizon(P_g, iteration, start, goal, self.replan_spacing)
+
+    def step(self, start, goal, previous=None, *, iteration: int = 0,
+             horizon: int | None = None, sd: SparseDiffusion | None = None, generator=None,
+             settle: bool = True, times: dict | None = None) -> GlobalStep:
+        """Iteration ``iteration`` (p, waypoints reached since the goal's first plan) of
+        Algorithm 1 from ``start`` (2,) [m] to ``goal`` (2,) [m].
+
+        Args:
+            previous: (P, 2) [m] the plan being followed (a warm start's source; None: none).
+            horizon: the plan's horizon (None: :meth:`horizon`; the online runner passes its
+                own, the same number).
+            sd: the SparseDiffusion view to plan with (None: the static one).
+            generator: SD's random numbers.
+            settle: False turns the settle rule off for this call (backtracking re-plans).
+            times: the subgoal rule's cost-to-go time is added to ``times["goal_field"]`` [ms].
+
+        Returns:
+            GlobalStep.
+        """
+        sd = sd or self.sd
+        S = np.asarray(start, dtype=np.float64).reshape(2)
+        G = np.asarray(goal, dtype=np.float64).reshape(2)
+        forced = self.forced(iteration)
+        if horizon is None:
+            horizon = self.horizon(iteration, S, G)
+        # the free-first-leg rule and first-leg repair act on cold every_waypoint re-plans,
+        # whose caller follows only the first leg; a forced plan is followed whole
+        first_leg_only = self.every_waypoint and not forced and sd.config.warm_fraction == 0
+        sparse = sd.replan(S, G, previous, horizon=horizon, generator=generator,
+                           repair_legs=1 if first_leg_only else None)
+        if (self.every_waypoint and not forced and iteration >= sd.config.horizon - 1
+                and self.subgoaling(sd)):  # beyond where Algorithm 1 would have reached G
+            sparse = self.subgoal_rule().apply(sd, S, G, sparse, iteration,
+                                               generator=generator, times=times)
+        wp = sparse.waypoints
+        whole = len(wp) - 1
+        if not self.every_waypoint or forced:
+            return GlobalStep(sparse, wp, whole, forced=forced)
+        if settle and len(wp) > 2 and self.legs_free(wp, sd):
+            return GlobalStep(sparse, wp, whole, settled=True)
+        # a plan toward a subgoal whose legs up to the subgoal are free: followed to the
+        # subgoal (its last leg, to G, is left to the re-plans)
+        if settle and sparse.first_leg == "subgoal" and self.legs_free(wp[:-1], sd):
+            return GlobalStep(sparse, wp, max(1, len(wp) - 2))
+        return GlobalStep(sparse, wp, 1)
