@@ -1,8 +1,0 @@
-#!/bin/bash
-# usage: CODE=/tmp/s19/code bench.sh TAG MODELS MAP SEED "ROBOTS" [extra...]
-set -u
-TAG=$1; M=$2; MAP=$3; S=$4; R=$5; shift 5
-source /work/main/.venv/bin/activate
-cd /tmp/s19
-PYTHONPATH=${CODE:-/work/main} ECAHD_MODELS=$M python -m ecahd_ros.cli bench planning --map $MAP --problems ${N:-32} --seed $S --robots $R --methods hd --no-ablation --precision auto --guidance on --md /tmp/s19/res/${TAG}_s$S.md --json /tmp/s19/res/${TAG}_s$S.json "$@" > /tmp/s19/res/${TAG}_s$S.log 2>&1
-echo "$TAG s$S rc=$?"
