@@ -145,7 +145,7 @@ class CollisionMonitorConfig:
     slowdown_profile: str = "linear"
     stop_margin: float = 0.02
     min_points: int = 1
-    source_timeout: float = 2.0
+    source_timeout: float = 0.5  # five missed scans at 10 Hz (Nav2's default: 2.0)
     slowdown_limits: tuple[float, float] | None = None
     escape_limits: tuple[float, float] | None = None
     yield_horizon: float = 3.0

@@ -1,7 +1,9 @@
 """``config/ecahd.yaml``: every parameter of every node, with its default and description, in
-the ``<node>: ros__parameters:`` layout that ``--params-file`` and launch files read. Rendered
-from the nodes' own ParamSpec lists, so the file cannot drift from the code
-(``test/test_config_doc.py`` compares them)."""
+the ``<node>: ros__parameters:`` layout that ``--params-file`` and launch files read; and the
+parameter tables of docs/parameters.md (between ``<!-- parameters:<node>:begin -->`` and
+``<!-- parameters:<node>:end -->``). Both are rendered from the nodes' own ParamSpec lists, so
+they cannot drift from the code (``test/test_config_doc.py`` compares them):
+``ecahd config --out config/ecahd.yaml --md docs/parameters.md``."""
 from __future__ import annotations
 
 import argparse
@@ -47,8 +49,43 @@ def render_yaml() -> str:
     return "\n".join(lines)
 
 
+def _md_value(value) -> str:
+    return "`" + ("''" if value == "" else _yaml_value(value).strip('"')) + "`"
+
+
+def render_table(node: str) -> str:
+    """The Markdown table of ``node``'s parameters: name, default, description (*dynamic*: can
+    be set at run time, the module's DYNAMIC)."""
+    module = importlib.import_module(NODES[node])
+    dynamic = set(getattr(module, "DYNAMIC", ()))
+    rows = ["| parameter | default | meaning |", "|---|---|---|"]
+    for spec in module.PARAMETERS:
+        text = spec.description.replace("|", "\\|")
+        if spec.name in dynamic:
+            text += " (*dynamic*)"
+        rows.append(f"| `{spec.name}` | {_md_value(spec.default)} | {text} |")
+    return "\n".join(rows)
+
+
+def update_markdown(text: str) -> str:
+    """``text`` with every node's block between its markers replaced by :func:`render_table`;
+    EcahdError if a node's markers are missing."""
+    from ecahd_core.errors import EcahdError
+
+    for node in NODES:
+        begin, end = f"<!-- parameters:{node}:begin -->", f"<!-- parameters:{node}:end -->"
+        if begin not in text or end not in text:
+            raise EcahdError(f"no {begin} ... {end} block for node {node}")
+        head, rest = text.split(begin, 1)
+        _, tail = rest.split(end, 1)
+        text = f"{head}{begin}\n{render_table(node)}\n{end}{tail}"
+    return text
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--out", default=None, help="write here instead of printing")
+    p.add_argument("--out", default=None, help="write the YAML here instead of printing")
+    p.add_argument("--md", default=None, help="rewrite the parameter tables of this Markdown "
+                                              "file (docs/parameters.md) in place")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -56,6 +93,10 @@ def run(args: argparse.Namespace) -> int:
     if args.out:
         Path(args.out).write_text(text)
         print(f"wrote {args.out}")
-    else:
+    elif not args.md:
         print(text, end="")
+    if args.md:
+        path = Path(args.md)
+        path.write_text(update_markdown(path.read_text()))
+        print(f"updated the parameter tables of {args.md}")
     return 0

@@ -2,7 +2,9 @@
 Algorithm 1 lines 2-11 with its shrinking horizon), and the Table III baselines' global planners.
 
 A goal becomes a plan here. The node is a thin shell over
-:class:`ecahd_core.planning.online.GlobalRunner` (when to plan, unit-tested without ROS). With
+:class:`ecahd_core.planning.online.OnlinePlanner` (when to plan and what, unit-tested without
+ROS), which makes every SD plan with :class:`ecahd_core.planning.rules.SparseStage`, the same
+code as ``ecahd plan`` and the planning benchmarks (``test/test_online_offline.py``). With
 ``method`` "sd" (ECAHD): on ``goal_pose`` the node samples N
 candidate global plans of P^g waypoints from the robot's pose (``odom``) to the goal in one
 batch, keeps the best of N and publishes its waypoints on ``plan``. When the robot comes within
@@ -20,48 +22,9 @@ and no ``replan_timeout``; their whole path goes out on ``plan`` for the local r
     "fd": the Diffuser-style Full Diffusion model (100 points, ``fd_model``), guided by J when
         ``fd_guidance``; seeded by ``seed`` like SD.
 
-Parameters (read-only, declared in :data:`PARAMETERS`):
-    method (str, "sd"): the global planner, one of METHODS ("sd", "astar", "fd").
-    sd_model (str, ""): SD checkpoint path; "" = the shipped model for ``map_name``.
-    fd_model (str, ""), fd_guidance (bool, false): the FD checkpoint ("" = shipped) and whether
-        J guides it (method "fd").
-    map_name (str, "maze2d-large"): the map's identity (an OccupancyGrid has no name); the
-        checkpoint must have been trained for this name and the received grid's fingerprint.
-    num_candidates (int, 10): N, candidates sampled in one batch.
-    horizon (int, 10): P^g, waypoints of the first global plan.
-    ddim_steps (int, 0): DDIM steps of SD or FD; 0 = the checkpoint's.
-    epsilon (double, 1.0): [m] goal-reaching radius of the selection rule.
-    selection (str, "collision_aware"): collision_aware (J weighs the candidates, as the paper's
-        Table III runs do) or shortest_reaching (Sec. III-A's rule).
-    robot (str, "circle"), footprint (str, ""), footprint_padding (double, 0.0 m): the robot.
-    global_frame (str, "map"): frame of goals and plans.
-    waypoint_tolerance (double, 0.3): [m] distance to the next waypoint that triggers a replan
-        (sd); distance to the goal that ends it (all methods).
-    replan (str, "every_waypoint"): sd: Algorithm 1's replanning at each waypoint, or "once".
-    subgoals (bool, true), settle (bool, true): sd, every_waypoint, on maps where re-plans have
-        a replan spacing and the free-first-leg rule acts (building maps): the subgoal rule (a
-        re-plan past P^g - 1 waypoints whose first leg makes no progress by the goal's
-        cost-to-go over the static map plans toward a point on the shortest route; the
-        cost-to-go's graph is built when the map arrives) and the settle rule (a plan whose
-        every straight leg is free by the leg test on the map and the remembered obstacles is
-        followed whole: no re-plan at its waypoints; a plan toward a subgoal whose legs up to
-        the subgoal are free, to the subgoal; timeout and blocked re-plans still act).
-        As ``HierarchicalPlanner``'s ``subgoals`` and ``settle`` in ``ecahd bench planning``.
-    replan_timeout (double, 5.0): [s] no progress toward the next waypoint (reaching it, or
-        coming 0.25 m nearer it than before) for this long replans (sd); 0 = never.
-        Doubles with each further such replan (at most 8x) until the robot progresses again.
-    warm_fraction (double, 0.0): sd, every_waypoint: the re-plan at a reached waypoint starts
-        from the rest of the current plan noised to where the last ``warm_fraction`` (0..1) of
-        SD's DDIM schedule begins and runs only those steps (``SparseConfig.warm_fraction``,
-        ours); 0 = from noise, Algorithm 1 as written. A goal's first plan, timeout and
-        blocked re-plans always sample from noise.
-    seed (int, 0): seed of the sampler's torch.Generator (a seed reproduces a plan sequence).
-    torch_threads (int, 1): torch.set_num_threads.
-    inference_precision (str, "auto"): fp32, bf16, or auto (bf16 where the CPU has native
-        bfloat16): the SD Transformer's encoder layers (``SamplerConfig.precision``).
-    nice (int, 0): the nice value of the thread that spins the node (and plans) is raised by
-        this much at start-up, so that planning yields the CPU to the controller on a busy
-        computer.
+Parameters (read-only): each declared once in :data:`PARAMETERS` with its default (from the
+core config it sets: OnlinePlannerConfig, GlobalRunnerConfig, SparseConfig) and description;
+``config/ecahd.yaml`` and docs/parameters.md list them all.
 A parameter out of range, an unknown robot or an unreadable model ends the node at start-up
 with one error line and exit code 1 (``ecahd_ros.spin``).
 
@@ -73,6 +36,11 @@ Subscribes:
         goal pre-empts the current one; a goal before map and odometry is queued.
     odom (nav_msgs/Odometry; reliable, depth 10): the robot's pose in ``global_frame``;
         non-finite or absurd poses are logged and ignored.
+    local_costmap (nav_msgs/OccupancyGrid; reliable, depth 1): local_refiner's window of the
+        obstacles its scans found; re-plans avoid them for ``obstacle_memory`` s.
+    ecahd/replan (std_msgs/String; reliable, depth 10): JSON ``{"reason": ...}`` from
+        local_refiner when a segment is blocked: a re-plan from the pose (the second
+        for a goal is A* round what is known, followed to the goal).
 Publishes:
     plan (nav_msgs/Path; reliable, transient_local, depth 1): the selected sparse waypoints
         (sd) or the whole path (astar, fd), first = robot pose, last = the goal exactly.
@@ -99,7 +67,6 @@ from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ecahd_core.errors import EcahdError, PlanningError
-from ecahd_core.placement import LEG_BATCHES
 from ecahd_core.planning.horizon import REPLAN_POLICIES
 from ecahd_core.planning.online import (ASTAR_SPACING, METHODS, GlobalRunnerConfig,
                                         OnlinePlanner, OnlinePlannerConfig, PlanOutcome)
@@ -116,46 +83,49 @@ from ecahd_ros.spin import spin_node
 
 __all__ = ["ASTAR_SPACING", "GlobalPlanner", "GlobalPlannerParams", "PARAMETERS", "main"]
 
+# the defaults live in the core configs the parameters set (one home for each)
+_ONLINE, _RUNNER, _SPARSE = OnlinePlannerConfig(), GlobalRunnerConfig(), SparseConfig()
+
 PARAMETERS = [
-    ParamSpec("method", "sd", f"global planner: {list(METHODS)} (sd: ECAHD, replanned at each "
+    ParamSpec("method", _ONLINE.method, f"global planner: {list(METHODS)} (sd: ECAHD, replanned at each "
                               "waypoint; astar, fd: one whole path per goal)"),
     ParamSpec("sd_model", "", "SD checkpoint path; '' = the shipped model for map_name"),
     ParamSpec("fd_model", "", "FD checkpoint path (method fd); '' = the shipped model"),
     ParamSpec("fd_guidance", False, "method fd: guide the Full Diffusion sample by J"),
     *shared("map_name"),
-    ParamSpec("num_candidates", 10, "N, candidate global plans sampled in one batch"),
-    ParamSpec("horizon", 10, "P^g, waypoints of the first global plan"),
+    ParamSpec("num_candidates", _SPARSE.num_candidates, "N, candidate global plans sampled in one batch"),
+    ParamSpec("horizon", _RUNNER.horizon, "P^g, waypoints of the first global plan"),
     ParamSpec("max_spacing", 0.0, "[m] sd: waypoint spacing by distance, legs of a plan longer "
                                   "than this re-sampled by SD between their ends (for big "
                                   "maps); 0 = off (the paper's fixed P^g)"),
-    ParamSpec("place_reach", -1.0, "[m] sd: SD's waypoints that lie in a wall (map + remembered "
+    ParamSpec("place_reach", _ONLINE.place_reach, "[m] sd: SD's waypoints that lie in a wall (map + remembered "
                                    "obstacles) move into free space at most this far, and legs "
                                    "crossing a wall get a placed midpoint (leg_repair); -1 = by "
                                    "the map: 1.0 on maps over 50 000 cells, else off; off (or "
                                    "<= 0.2): waypoints and the goal move at most 0.2 m"),
-    ParamSpec("leg_repair", 3, "sd: rounds of leg repair while place_reach is on (> 0.2 m); "
+    ParamSpec("leg_repair", _ONLINE.leg_repair, "sd: rounds of leg repair while place_reach is on (> 0.2 m); "
                                "0 = off"),
-    ParamSpec("repair_reach", -1.0, "[m] sd: leg repair looks this far from a leg's middle for "
+    ParamSpec("repair_reach", _ONLINE.repair_reach, "[m] sd: leg repair looks this far from a leg's middle for "
                                     "its new waypoint (at most half the leg); -1 = the larger "
                                     "of place_reach and 3.0"),
-    ParamSpec("leg_batches", LEG_BATCHES, "sd, every_waypoint, with place_reach on: when the "
+    ParamSpec("leg_batches", _SPARSE.leg_batches, "sd, every_waypoint, with place_reach on: when the "
                                           "chosen candidate's first leg still crosses a wall "
                                           "after leg repair, the first of the other candidates "
                                           "whose first leg does not, else up to this many more "
                                           "batches of N (one waypoint more each); 0 = the "
                                           "other candidates only; -1 = off"),
     ParamSpec("ddim_steps", 0, "DDIM steps of SD or FD; 0 = the checkpoint's"),
-    ParamSpec("epsilon", 1.0, "[m] goal-reaching radius of the best-of-N rule"),
+    ParamSpec("epsilon", _SPARSE.epsilon, "[m] goal-reaching radius of the best-of-N rule"),
     ParamSpec("selection", "collision_aware", f"best-of-N rule: {list(SELECTION_RULES)} "
                                               "(shortest_reaching: Sec. III-A's)"),
     *shared("robot", "footprint", "footprint_padding", "global_frame", "clearance_margin",
             "cost_margin"),
-    ParamSpec("waypoint_tolerance", 0.3, "[m] reaching the next waypoint this close replans "
+    ParamSpec("waypoint_tolerance", _RUNNER.waypoint_tolerance, "[m] reaching the next waypoint this close replans "
                                          "with horizon P^g - p (sd); the goal this close is "
                                          "reached"),
-    ParamSpec("replan", "every_waypoint", f"sd: {list(REPLAN_POLICIES)} (every_waypoint: "
+    ParamSpec("replan", _RUNNER.replan, f"sd: {list(REPLAN_POLICIES)} (every_waypoint: "
                                           "Algorithm 1; once: one SD plan per goal)"),
-    ParamSpec("replan_spacing", -1.0, "[m] sd, every_waypoint: each re-plan keeps at least "
+    ParamSpec("replan_spacing", _ONLINE.replan_spacing, "[m] sd, every_waypoint: each re-plan keeps at least "
                                       "ceil(D / this) + 1 waypoints (at most P^g) for the "
                                       "straight distance D left to the goal, instead of "
                                       "Algorithm 1's P^g - p, whose last plan is a straight "
@@ -163,27 +133,27 @@ PARAMETERS = [
                                       "map and model: on maps over 50 000 cells the SD "
                                       "model's expert waypoint spacing, at least 3.0, else "
                                       "off; 0 = off"),
-    ParamSpec("subgoals", True, "sd, every_waypoint, with a replan spacing and the free-first-"
+    ParamSpec("subgoals", _ONLINE.subgoals, "sd, every_waypoint, with a replan spacing and the free-first-"
                                 "leg rule on (building maps): a re-plan past P^g - 1 waypoints "
                                 "whose first leg makes no progress by the goal's cost-to-go "
                                 "plans toward a point on the shortest route (the subgoal rule, "
                                 "ecahd_core.progress.SubgoalRule)"),
-    ParamSpec("settle", True, "sd, every_waypoint, with a replan spacing and the free-first-leg "
+    ParamSpec("settle", _ONLINE.settle, "sd, every_waypoint, with a replan spacing and the free-first-leg "
                               "rule on (building maps): a plan whose every straight leg is free "
                               "by the leg test is followed whole, not re-planned at each "
                               "waypoint, and a plan toward a subgoal whose legs up to it are "
                               "free is followed to the subgoal (the settle rule)"),
-    ParamSpec("replan_timeout", 5.0, "[s] sd: with no progress toward the next waypoint (reaching "
+    ParamSpec("replan_timeout", _RUNNER.replan_timeout, "[s] sd: with no progress toward the next waypoint (reaching "
                                      "it, or coming 0.25 m nearer it than before) for this long, "
                                      "replan from the current pose (same horizon); doubles with "
                                      "each further such replan (at most 8x) until the robot "
                                      "progresses again; 0 = never"),
-    ParamSpec("warm_fraction", 0.0, "sd, every_waypoint: a re-plan at a reached waypoint starts "
+    ParamSpec("warm_fraction", _SPARSE.warm_fraction, "sd, every_waypoint: a re-plan at a reached waypoint starts "
                                     "from the rest of the current plan noised to the last F "
                                     "(0..1) of SD's DDIM schedule; 0 = from noise (Algorithm 1 "
                                     "as written; 0.3 took Algorithm 1 on maze2d-large from 177 "
                                     "to 115 ms per problem, docs/RESULTS.md)"),
-    ParamSpec("obstacle_memory", 60.0, "[s] obstacles the local costmap found are avoided "
+    ParamSpec("obstacle_memory", _ONLINE.obstacle_memory, "[s] obstacles the local costmap found are avoided "
                                        "by re-plans for this long unless seen gone"),
     ParamSpec("inference_precision", "auto", f"sd: the SD Transformer computes in one of "
                                              f"{list(PRECISION_CHOICES)} (auto: bf16 where the "

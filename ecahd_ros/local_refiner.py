@@ -75,7 +75,7 @@ from rclpy.node import Node
 from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
-from ecahd_core.collision_monitor import SLOWDOWN_PROFILES
+from ecahd_core.collision_monitor import SLOWDOWN_PROFILES, CollisionMonitorConfig
 from ecahd_core.errors import EcahdError
 from ecahd_core.planning.local import LocalRunner, LocalRunnerConfig, SegmentResult, judge_items
 from ecahd_core.planning.hierarchical import DenseConfig
@@ -90,6 +90,9 @@ from ecahd_ros.params import (ParamSpec, collision_cost, declare_parameters, mak
                               shared)
 from ecahd_ros.qos import MAP_QOS, PLAN_QOS, SCAN_QOS, STREAM_QOS, VIZ_QOS
 from ecahd_ros.spin import spin_node
+
+# the monitor's defaults live in CollisionMonitorConfig (one home for each)
+_MONITOR = CollisionMonitorConfig()
 
 PARAMETERS = [
     ParamSpec("dd_model", "", "DD checkpoint path; '' = the shipped model for map_name"),
@@ -149,26 +152,26 @@ PARAMETERS = [
     ParamSpec("collision_monitor", True, "stop / slow down any cmd_vel whose footprint, swept "
                                          "over monitor_time_to_collision, hits a scan point "
                                          "that is not on the static map"),
-    ParamSpec("monitor_time_to_collision", 1.0, "[s] horizon of the collision monitor"),
-    ParamSpec("monitor_stop_margin", 0.02, "[m] footprint growth that stops the robot"),
-    ParamSpec("monitor_slowdown_margin", 0.3, "[m] footprint growth that slows the robot down"),
-    ParamSpec("monitor_slowdown_ratio", 0.3, "slowing down caps |v| and |w| at this times "
+    ParamSpec("monitor_time_to_collision", _MONITOR.time_to_collision, "[s] horizon of the collision monitor"),
+    ParamSpec("monitor_stop_margin", _MONITOR.stop_margin, "[m] footprint growth that stops the robot"),
+    ParamSpec("monitor_slowdown_margin", _MONITOR.slowdown_margin, "[m] footprint growth that slows the robot down"),
+    ParamSpec("monitor_slowdown_ratio", _MONITOR.slowdown_ratio, "slowing down caps |v| and |w| at this times "
                                              "max_v and max_w (at the stop margin with the "
                                              "linear profile)"),
-    ParamSpec("monitor_slowdown_profile", "linear", "'linear': the slowdown's ratio rises "
+    ParamSpec("monitor_slowdown_profile", _MONITOR.slowdown_profile, "'linear': the slowdown's ratio rises "
                                                     "from monitor_slowdown_ratio at the stop "
                                                     "margin to 1 at the slowdown margin with "
                                                     "the obstacle's least clearance; 'step': "
                                                     "monitor_slowdown_ratio whenever within "
                                                     "the margin (Nav2)"),
-    ParamSpec("monitor_source_timeout", 0.5, "[s] scans older than this (after the first) stop "
+    ParamSpec("monitor_source_timeout", _MONITOR.source_timeout, "[s] scans older than this (after the first) stop "
                                              "the robot"),
     ParamSpec("monitor_yield", True, "when the monitor stops the robot where a moving obstacle "
                                      "(tracked from the scans) would hit it, drive the escape "
                                      "command that stays clear longest (static map checked)"),
-    ParamSpec("monitor_yield_horizon", 3.0, "[s] how far ahead moving obstacles are predicted "
+    ParamSpec("monitor_yield_horizon", _MONITOR.yield_horizon, "[s] how far ahead moving obstacles are predicted "
                                             "for yielding"),
-    ParamSpec("monitor_prediction_growth", 0.0, "[m/s] a moving obstacle predicted t s ahead "
+    ParamSpec("monitor_prediction_growth", _MONITOR.prediction_growth, "[m/s] a moving obstacle predicted t s ahead "
                                                 "counts as this times min(t, "
                                                 "monitor_time_to_collision) closer (its "
                                                 "velocity is an estimate); 0 trusts it"),
