@@ -78,7 +78,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from ecahd_core.collision_monitor import SLOWDOWN_PROFILES, CollisionMonitorConfig
 from ecahd_core.errors import EcahdError
 from ecahd_core.planning.local import LocalRunner, LocalRunnerConfig, SegmentResult, judge_items
-from ecahd_core.planning.hierarchical import DenseConfig
+from ecahd_core.planning.dense import DenseConfig, DenseStage
 from ecahd_core.sensing import PoseHistory
 from ecahd_core.worker import LatestWorker
 from ecahd_ros.callbacks import check_frame, guard, now_seconds
@@ -350,7 +350,7 @@ class LocalRefiner(Node):
         set_torch_threads(p.torch_threads)
         self.generator = torch.Generator().manual_seed(p.seed)
         self.grid = None
-        self.planner = None  # HierarchicalPlanner (its local stage only) once a map arrives
+        self.planner = None  # DenseStage (the local stage) once a map arrives
         self._lock = threading.Lock()  # the runner is shared by the callback threads
         self._world_lock = threading.Lock()  # the local costmap: scan worker vs publisher
         # long work off the executor thread (ecahd_core.worker): maps, scan fusion
@@ -438,15 +438,14 @@ class LocalRefiner(Node):
         """(map worker) Everything the local stage needs on ``grid``, swapped in at once."""
         from ecahd_core.model_zoo import load_model
         from ecahd_core.planning.local import SegmentRefiner
-        from ecahd_core.planning.hierarchical import HierarchicalPlanner
 
         p = self.params
         ckpt = (load_model("dd", grid, path=p.dd_model or None, footprint=self.footprint)
                 if p.dd_enabled else None)
         cost = collision_cost(p, grid, self.footprint)
-        # only the local stage (local_cost, refine, polish) is used: no SD model here
-        planner = HierarchicalPlanner(
-            None, ckpt, costmap=cost.costmap, footprint_points=cost.footprint_points,
+        # Algorithm 1's local stage, the offline planner's own (DenseStage)
+        planner = DenseStage(
+            ckpt, costmap=cost.costmap, footprint_points=cost.footprint_points,
             cost_config=cost.config,
             dense=DenseConfig(c_th=p.c_th, enabled=p.dd_enabled,
                               polish_steps=p.polish_steps))

@@ -44,7 +44,7 @@ def test_bench_planning_figure_on_a_nav2_yaml_map(tmp_path):
 def test_bench_defaults_follow_the_planner():
     # the bench module avoids importing torch at parser-build time, so it restates two defaults
     from ecahd_core.bench.planning import PlanningBenchSettings
-    from ecahd_core.planning.hierarchical import DenseConfig
+    from ecahd_core.planning.dense import DenseConfig
     from ecahd_core.planning.sparse import SparseConfig
 
     assert PlanningBenchSettings().guidance_weight == DenseConfig().guidance_weight

@@ -450,10 +450,10 @@ STALL_RATE = 10.0  # [Hz] control_rate
 def test_a_stalled_local_stage_never_stops_cmd_vel(ros_context, monkeypatch):
     """The refiner's local stage (J check; DD off to skip loading it) sleeps STALL s: cmd_vel
     keeps coming at control_rate, zero until the refined segment is ready, then driving."""
-    from ecahd_core.planning.hierarchical import HierarchicalPlanner
+    from ecahd_core.planning.dense import DenseStage
     from ecahd_ros.local_refiner import LocalRefiner
 
-    original = HierarchicalPlanner.local_stage
+    original = DenseStage.local_stage
     finished = []  # monotonic times the slow stages returned
 
     def slow_local_stage(self, *args, **kwargs):
@@ -462,7 +462,7 @@ def test_a_stalled_local_stage_never_stops_cmd_vel(ros_context, monkeypatch):
         finished.append(time.monotonic())
         return out
 
-    monkeypatch.setattr(HierarchicalPlanner, "local_stage", slow_local_stage)
+    monkeypatch.setattr(DenseStage, "local_stage", slow_local_stage)
     refiner = LocalRefiner(context=ros_context, parameter_overrides=[
         Parameter("dd_enabled", value=False), Parameter("control_rate", value=STALL_RATE)])
     probe = rclpy.create_node("stall_probe", context=ros_context)

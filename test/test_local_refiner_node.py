@@ -150,12 +150,12 @@ def test_colliding_segment_is_refined_by_dd(rig):
 
 
 def test_dd_disabled_follows_the_straight_plan_and_never_runs_dd(rig, monkeypatch):
-    from ecahd_core.planning.hierarchical import HierarchicalPlanner
+    from ecahd_core.planning.dense import DenseStage
 
     def no_dd(*args, **kwargs):
         raise AssertionError("DD ran with dd_enabled false")
 
-    monkeypatch.setattr(HierarchicalPlanner, "refine", no_dd)
+    monkeypatch.setattr(DenseStage, "refine", no_dd)
     r = rig(dd_enabled=False)
     r.send_map()
     assert r.node.planner.dd is None  # no DD model loaded

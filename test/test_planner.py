@@ -9,7 +9,8 @@ from ecahd_core.errors import EcahdError
 from ecahd_core.footprint import make_footprint
 from ecahd_core.maps import builtin_map
 from ecahd_core.model_zoo import load_model
-from ecahd_core.planning.hierarchical import DenseConfig, HierarchicalPlanner
+from ecahd_core.planning.dense import DenseConfig
+from ecahd_core.planning.hierarchical import HierarchicalPlanner
 from ecahd_core.planning.sparse import SparseConfig, SparseDiffusion
 
 GRID = builtin_map("maze2d-large")
@@ -371,7 +372,7 @@ def test_local_plans_have_the_points_the_dd_checkpoint_learnt(tmp_path):
 def test_dd_guidance_weight_follows_the_cost_map_margin():
     """omega is chosen at the 0.1 m margin; on a wider one (a building's 0.5 m) DD is guided by
     omega x 0.1 / margin, so the paper's tables keep 0.03."""
-    from ecahd_core.planning.hierarchical import guidance_weight_for
+    from ecahd_core.planning.dense import guidance_weight_for
 
     fp = make_footprint("circle")
     sd = SparseDiffusion(load_model("sd", GRID, footprint=fp), SparseConfig(num_candidates=4))

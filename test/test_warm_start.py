@@ -12,7 +12,8 @@ from ecahd_core.errors import EcahdError, TrajectoryError
 from ecahd_core.footprint import make_footprint
 from ecahd_core.maps import builtin_map
 from ecahd_core.model_zoo import load_model
-from ecahd_core.planning.hierarchical import DenseConfig, HierarchicalPlanner
+from ecahd_core.planning.dense import DenseConfig
+from ecahd_core.planning.hierarchical import HierarchicalPlanner
 from ecahd_core.planning.sparse import SparseConfig, SparseDiffusion
 
 NORMALIZER = Normalizer.from_bounds(0.0, 0.0, 4.0, 2.0)  # centre (2, 1), scale (2, 1)

@@ -271,7 +271,8 @@ def _planners(settings: ContentionBenchSettings):
     from ecahd_core.footprint import make_footprint
     from ecahd_core.maps import load_map
     from ecahd_core.model_zoo import load_model
-    from ecahd_core.planning.hierarchical import DenseConfig, HierarchicalPlanner
+    from ecahd_core.planning.dense import DenseConfig
+    from ecahd_core.planning.hierarchical import HierarchicalPlanner
     from ecahd_core.planning.sparse import SparseConfig, SparseDiffusion
 
     grid = load_map(settings.map)

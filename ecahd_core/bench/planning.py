@@ -213,8 +213,8 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
     from ecahd_core.planning.horizon import replan_spacing_for
     from ecahd_core.placement import auto_reach, placer_for
     from ecahd_core.planning.full import FullDiffusion
-    from ecahd_core.planning.hierarchical import (DenseConfig, HierarchicalPlanner,
-                                                  guidance_weight_for)
+    from ecahd_core.planning.dense import DenseConfig, guidance_weight_for
+    from ecahd_core.planning.hierarchical import HierarchicalPlanner
     from ecahd_core.planning.sparse import SparseConfig, SparseDiffusion
     from ecahd_core.problems import make_problems
     from ecahd_core.safety import SafetyNet, SafetyNetConfig

@@ -245,7 +245,8 @@ def _plan_diffusion(args, grid, footprint, start, goal):
     from ecahd_core.planning.horizon import replan_spacing_for
     from ecahd_core.placement import placer_for
     from ecahd_core.planning.full import FullDiffusion
-    from ecahd_core.planning.hierarchical import DenseConfig, HierarchicalPlanner
+    from ecahd_core.planning.dense import DenseConfig
+    from ecahd_core.planning.hierarchical import HierarchicalPlanner
     from ecahd_core.planning.sparse import SparseConfig, SparseDiffusion
 
     polish = {} if args.polish_steps is None else {"polish_steps": args.polish_steps}

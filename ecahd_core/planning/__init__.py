@@ -6,9 +6,11 @@ Modules, by question:
                     the free-first-leg rule, the subgoal rule, the settle rule, the forced last
                     plan; one iteration's global plan, for the offline planner and the nodes alike
 - ``horizon``       how many waypoints a re-plan keeps (P^g - p; our replan spacing)
-- ``hierarchical``  Algorithm 1 over a whole problem with Dense Diffusion's local stage
-                    (lines 13-18, Algorithm 2), the exact rule and backtracking: ``ecahd plan``
-                    and the planning benchmarks
+- ``dense``         the local stage (lines 13-18, Algorithm 2): J check, DD, keep-better,
+                    polishing, the exact rule (DenseStage), for the offline planner,
+                    local_refiner and the safety net alike
+- ``hierarchical``  Algorithm 1 over a whole problem: SparseStage's plans, DenseStage's local
+                    plans in one batch, backtracking: ``ecahd plan`` and the planning benchmarks
 - ``full``          the Full Diffusion baseline
 - ``online``        the online global half: when to re-plan (GlobalRunner) and what to plan
                     (OnlinePlanner, over SparseStage): global_planner's core

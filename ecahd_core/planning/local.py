@@ -4,7 +4,7 @@ runtime classes with no rclpy: local_refiner only converts messages and calls th
 :class:`LocalRunner`: the global plan's segments W[k-1] -> W[k] (the first from the robot's
     pose when the plan arrived) go to a ``refine`` function (J check, DD when c^l > c_th,
     polishing, the exact check: :class:`SegmentRefiner` over the same local stage as the
-    offline planner, :meth:`~ecahd_core.planning.hierarchical.HierarchicalPlanner.local_stage`)
+    offline planner, :meth:`~ecahd_core.planning.dense.DenseStage.local_stage`)
     that runs on a worker thread, ``prepare_ahead`` segments ahead of the robot, so the control
     tick never waits for DD. :meth:`LocalRunner.tick` is bounded work: pure pursuit on the
     current segment's local plan (resampled once, searched in a window around the robot's
@@ -350,7 +350,7 @@ class LocalRunner:
 
 class SegmentRefiner:
     """The ``refine`` of a LocalRunner: one segment's local stage
-    (:meth:`~ecahd_core.planning.hierarchical.HierarchicalPlanner.local_stage`: the straight LocalPlan, J,
+    (:meth:`~ecahd_core.planning.dense.DenseStage.local_stage`: the straight LocalPlan, J,
     DD above c_th, keep-better, polishing; both ends fixed) judged by the exact checker.
 
     When the refined plan still collides by the exact checker: the straight plan if the exact
@@ -361,7 +361,7 @@ class SegmentRefiner:
     paper's ablations, which follow straight segments whatever they hit).
 
     Args:
-        planner: a HierarchicalPlanner (only its local stage is used).
+        planner: a DenseStage (or a HierarchicalPlanner: its local stage).
         grid: the GridMap the exact checker judges on; footprint: the robot.
         generator: the DD sampler's torch.Generator (a seed reproduces the plans).
     """
