@@ -15,6 +15,6 @@ Modules, by question:
 - ``online``        the online global half: when to re-plan (GlobalRunner) and what to plan
                     (OnlinePlanner, over SparseStage): global_planner's core
 - ``local``         the online local half: segments refined ahead, pure pursuit (LocalRunner,
-                    SegmentRefiner over HierarchicalPlanner's local stage): local_refiner's core
+                    SegmentRefiner over DenseStage): local_refiner's core
 - ``detour``        A* detours round what the robot knows (the fallback)
 """
