@@ -46,10 +46,11 @@ def test_quick_run_writes_every_cell_and_leaves_no_hog(tmp_path, capsys):
     assert torch.get_num_threads() == threads_before  # restored after the run
     r = json.loads(out.read_text())
     assert set(r) == {"cells", "ratios", "context"}
-    # 2 workloads x 2 thread counts x (none, torch, spin)
-    assert len(r["cells"]) == 2 * 2 * 3 and len(r["ratios"]) == 2 * 2 * 2
+    # 3 workloads x 2 thread counts x (none, torch, spin)
+    assert len(r["cells"]) == 3 * 2 * 3 and len(r["ratios"]) == 3 * 2 * 2
     assert {(c["workload"], c["threads"], c["hog"]) for c in r["cells"]} == {
-        (w, t, h) for w in ("sd", "hd") for t in (1, 2) for h in ("none", "torch", "spin")}
+        (w, t, h) for w in ("sd", "hd", "alg1") for t in (1, 2)
+        for h in ("none", "torch", "spin")}
     for c in r["cells"]:
         assert set(c) == CELL_KEYS and c["calls"] == len(c["times_ms"]) >= 1
         assert 0 < c["p50_ms"] <= c["p99_ms"] and math.isfinite(c["p99_ms"])
@@ -66,6 +67,7 @@ def test_quick_run_writes_every_cell_and_leaves_no_hog(tmp_path, capsys):
     assert not multiprocessing.active_children()
     printed = capsys.readouterr().out
     assert "target (issue 9)" in printed and "Alg. 1, replan once" in printed
+    assert "Alg. 1, every waypoint" in printed  # what the nodes run
 
 
 def test_hog_is_cleaned_up_when_the_body_raises():

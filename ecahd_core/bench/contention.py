@@ -9,8 +9,11 @@ Workloads (the shipped models of the map, the core's default planner settings, a
 ``ecahd plan`` builds them):
 - ``sd``  Sparse Diffusion best-of-N alone (``SparseDiffusion.plan``, N = 10), one problem;
 - ``hd``  Algorithm 1 with ``replan="once"`` (``HierarchicalPlanner``: one SD best-of-N, then
-          guided DD where J exceeds c_th, polishing) on a few held-out problems
-          (``ecahd_core.problems``, seed 2026).
+          guided DD where J exceeds c_th, polishing, the exact rule) on a few held-out problems
+          (``ecahd_core.problems``, seed 2026);
+- ``alg1`` Algorithm 1 as the nodes run it: an SD re-plan at every waypoint with the map's
+          rules (``SparseStage``: the same code as global_planner's) and the local stages, on
+          the same problems: what ``ecahd plan`` runs.
 
 Each workload is timed with torch threads = ``threads`` (ours, default 1) and, as the cautionary
 reference, = every core, under three conditions:
@@ -46,8 +49,9 @@ from ecahd_core.threads import INFERENCE_THREADS, set_torch_threads, training_th
 log = logging.getLogger(__name__)
 
 HOGS = ("torch", "spin")
-WORKLOADS = ("sd", "hd")
-WORKLOAD_LABELS = {"sd": "SD best-of-N", "hd": "Alg. 1, replan once"}
+WORKLOADS = ("sd", "hd", "alg1")
+WORKLOAD_LABELS = {"sd": "SD best-of-N", "hd": "Alg. 1, replan once",
+                   "alg1": "Alg. 1, every waypoint"}
 TARGET_RATIO = 3.0  # issue 9: hogged <= 3x quiet with our default threads
 
 
@@ -118,7 +122,7 @@ class ContentionBenchSettings:
 class Cell:
     """One workload x torch threads x hog: latencies [ms] of its timed calls."""
 
-    workload: str  # "sd" | "hd"
+    workload: str  # one of WORKLOADS
     threads: int
     hog: str  # "none" | "torch" | "spin"
     p50_ms: float
@@ -265,25 +269,21 @@ def _ratios(cells: list[Cell], ours: int) -> list[dict]:
 
 
 def _planners(settings: ContentionBenchSettings):
-    """SparseDiffusion and HierarchicalPlanner (replan once) with the core's defaults, as
-    ``ecahd plan`` and ``ecahd bench planning`` build them from the shipped models."""
-    from ecahd_core.cost import CollisionCost
+    """SparseDiffusion and the two HierarchicalPlanners (replan once; every waypoint with the
+    map's rules, as the nodes re-plan) with the core's defaults, as ``ecahd plan`` and
+    ``ecahd bench planning`` build them from the shipped models."""
     from ecahd_core.footprint import make_footprint
     from ecahd_core.maps import load_map
-    from ecahd_core.model_zoo import load_model
-    from ecahd_core.planning.dense import DenseConfig
     from ecahd_core.planning.hierarchical import HierarchicalPlanner
     from ecahd_core.planning.sparse import SparseConfig, SparseDiffusion
 
     grid = load_map(settings.map)
     fp = make_footprint(settings.robot)
-    cost = CollisionCost.build(grid, fp).as_tuple()
-    sd = SparseDiffusion(load_model("sd", grid, footprint=fp),
-                         SparseConfig(num_candidates=settings.candidates), cost=cost)
-    hd = HierarchicalPlanner(sd, load_model("dd", grid, footprint=fp), costmap=cost[0],
-                             footprint_points=cost[1], cost_config=cost[2], dense=DenseConfig(),
-                             replan="once")
-    return grid, sd, hd
+    sd = SparseDiffusion.for_map(grid, fp, SparseConfig(num_candidates=settings.candidates,
+                                                        selection="collision_aware"))
+    once = HierarchicalPlanner.for_map(grid, fp, sd, replan="once")
+    every = HierarchicalPlanner.for_map(grid, fp, sd)
+    return grid, sd, once, every
 
 
 def run_contention_benchmark(settings: ContentionBenchSettings) -> ContentionBenchResult:
@@ -294,15 +294,18 @@ def run_contention_benchmark(settings: ContentionBenchSettings) -> ContentionBen
     from ecahd_core.problems import make_problems
 
     previous_threads = torch.get_num_threads()
-    grid, sd, hd = _planners(settings)
+    grid, sd, once, every = _planners(settings)
     problems = make_problems(grid, settings.problems, seed=settings.seed)
     gen = torch.Generator()
     p0 = problems[0]
     workloads = {
         "sd": (lambda i: sd.plan(p0.start, p0.goal, generator=gen), settings.sd_repeats),
-        "hd": (lambda i: hd.plan(problems[i % len(problems)].start,
-                                 problems[i % len(problems)].goal, generator=gen),
+        "hd": (lambda i: once.plan(problems[i % len(problems)].start,
+                                   problems[i % len(problems)].goal, generator=gen),
                settings.problems * settings.hd_rounds),
+        "alg1": (lambda i: every.plan(problems[i % len(problems)].start,
+                                      problems[i % len(problems)].goal, generator=gen),
+                 settings.problems * settings.hd_rounds),
     }
     spinners = settings.spinners or training_threads()
     cells, hog_pids = [], []
@@ -348,7 +351,8 @@ def format_table(r: ContentionBenchResult) -> str:
     ratio = {(x["workload"], x["threads"], x["hog"]): x for x in r.ratios}
     lines = [
         f"Plan latency beside a CPU hog: {c['map']}, {c['robot']}, SD best of "
-        f"{c['candidates']}, Alg. 1 replan once on {c['problems']} held-out problems; "
+        f"{c['candidates']}, Alg. 1 (replan once; every waypoint, as the nodes) on "
+        f"{c['problems']} held-out problems; "
         f"{m['cpu']}, {m['logical_cpus']} logical CPUs, torch {m['torch']}",
         f"hogs: torch = one MLP training process (width {c['hog_width']}, "
         f"{c['hog_torch_threads']} threads), spin = {c['spinners']} busy Python processes; "
@@ -385,7 +389,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--sd-repeats", type=int, default=d.sd_repeats, metavar="N",
                         help="timed SD best-of-N calls per cell")
     parser.add_argument("--problems", type=int, default=d.problems, metavar="N",
-                        help="held-out problems for Algorithm 1 (replan once)")
+                        help="held-out problems for Algorithm 1 (both policies)")
     parser.add_argument("--hd-rounds", type=int, default=d.hd_rounds, metavar="N",
                         help="passes over the problems per cell")
     parser.add_argument("--hogs", nargs="+", choices=HOGS, default=list(d.hogs),

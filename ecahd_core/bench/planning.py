@@ -205,13 +205,11 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                          f"{settings.guidance!r}")
 
     from ecahd_core.astar import clearance_for_footprint, planner_for
-    from ecahd_core.collision import exact_check_for
     from ecahd_core.cost import CollisionCost, CostConfig
     from ecahd_core.footprint import make_footprint
     from ecahd_core.maps import load_map
     from ecahd_core.model_zoo import load_model
-    from ecahd_core.planning.horizon import replan_spacing_for
-    from ecahd_core.placement import auto_reach, placer_for
+    from ecahd_core.placement import auto_reach
     from ecahd_core.planning.full import FullDiffusion
     from ecahd_core.planning.dense import DenseConfig, guidance_weight_for
     from ecahd_core.planning.hierarchical import HierarchicalPlanner
@@ -248,35 +246,27 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                                guidance_space=settings.guidance_space)
             plan_fn = lambda s, g: (fd.plan(s, g, generator=gen), None)  # noqa: E731
         else:
-            sd = SparseDiffusion(load_model("sd", grid, footprint=fp), SparseConfig(
-                num_candidates=settings.candidates, selection=settings.selection, guidance=(method == "sd" and guidance),
+            sd = SparseDiffusion.for_map(grid, fp, SparseConfig(
+                num_candidates=settings.candidates, selection=settings.selection,
+                guidance=(method == "sd" and guidance),
                 guidance_weight=settings.guidance_weight,
                 guidance_space=settings.guidance_space,
                 warm_fraction=settings.warm_fraction, max_spacing=settings.max_spacing,
                 precision=settings.precision, leg_batches=settings.leg_batches),
-                cost=cost, placer=placer_for(grid, fp, settings.place_reach))
+                cost=cost, place_reach=settings.place_reach)
             if method == "sd":
                 plan_fn = lambda s, g: (sd.plan(s, g, generator=gen).waypoints, None)  # noqa: E731
             else:
-                spacings[robot] = replan_spacing_for(grid, settings.replan_spacing,
-                                                     sd.expert_spacing)
-                hd = HierarchicalPlanner(sd, load_model("dd", grid, footprint=fp),
-                                         costmap=cost[0], footprint_points=cost[1],
-                                         cost_config=cost[2], dense=DenseConfig(
-                                             c_th=settings.c_th, guidance=guidance,
-                                             guidance_weight=settings.guidance_weight,
-                                             guidance_space=settings.guidance_space,
-                                             retries=settings.dd_retries,
-                                             polish_steps=settings.polish_steps,
-                                             keep_better=settings.keep_better),
-                                         replan=settings.replan,
-                                         replan_spacing=spacings[robot],
-                                         backtracks=settings.backtracks,
-                                         subgoals=settings.subgoals,
-                                         settle=settings.settle,
-                                         exact_check=(exact_check_for(grid, fp)
-                                                      if settings.exact_rule and not variant
-                                                      else None))
+                hd = HierarchicalPlanner.for_map(
+                    grid, fp, sd, dense=DenseConfig(
+                        c_th=settings.c_th, guidance=guidance,
+                        guidance_weight=settings.guidance_weight,
+                        guidance_space=settings.guidance_space, retries=settings.dd_retries,
+                        polish_steps=settings.polish_steps, keep_better=settings.keep_better),
+                    replan=settings.replan, replan_spacing=settings.replan_spacing,
+                    backtracks=settings.backtracks, subgoals=settings.subgoals,
+                    settle=settings.settle, exact=settings.exact_rule and not variant)
+                spacings[robot] = hd.replan_spacing
 
                 last = []  # the last HierarchicalPlan, for the net's retries
 

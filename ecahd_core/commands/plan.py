@@ -239,11 +239,9 @@ def _plan_diffusion(args, grid, footprint, start, goal):
     import numpy as np
     import torch
 
-    from ecahd_core.collision import densify, exact_check_for
+    from ecahd_core.collision import densify
     from ecahd_core.cost import CollisionCost
     from ecahd_core.model_zoo import load_model
-    from ecahd_core.planning.horizon import replan_spacing_for
-    from ecahd_core.placement import placer_for
     from ecahd_core.planning.full import FullDiffusion
     from ecahd_core.planning.dense import DenseConfig
     from ecahd_core.planning.hierarchical import HierarchicalPlanner
@@ -266,14 +264,11 @@ def _plan_diffusion(args, grid, footprint, start, goal):
         ms = (time.perf_counter() - t0) * 1e3
         return (path, path[:: max(1, len(path) // 10)], [], {"fd": ms, "total": ms}, 0, None,
                 None, None, {"waypoints_placed": 0, "exact_rule_segments": 0})
-    sd = SparseDiffusion(load_model("sd", grid, path=args.sd_model, footprint=footprint,
-                                    horizon=args.waypoints),
-                         SparseConfig(num_candidates=args.candidates, horizon=args.waypoints,
-                                      selection=args.selection, max_spacing=args.max_spacing,
-                                      guidance=(args.method == "sd" and guided),
-                                      warm_fraction=args.warm_fraction,
-                                      precision=args.precision), cost=cost,
-                         placer=placer_for(grid, footprint, args.place_reach))
+    sd = SparseDiffusion.for_map(grid, footprint, SparseConfig(
+        num_candidates=args.candidates, horizon=args.waypoints, selection=args.selection,
+        max_spacing=args.max_spacing, guidance=(args.method == "sd" and guided),
+        warm_fraction=args.warm_fraction, precision=args.precision),
+        cost=cost, place_reach=args.place_reach, model=args.sd_model)
     if args.method == "sd":
         sd.plan(start, goal, generator=gen())  # warm-up
         plan = sd.plan(start, goal, generator=gen())
@@ -281,13 +276,10 @@ def _plan_diffusion(args, grid, footprint, start, goal):
         return (plan.waypoints, plan.waypoints, others, {"sd": plan.time_ms, "total": plan.time_ms},
                 0, None, None, None,
                 {"waypoints_placed": plan.placed, "exact_rule_segments": 0})
-    hd = HierarchicalPlanner(sd, load_model("dd", grid, path=args.dd_model, footprint=footprint),
-                             costmap=cost[0], footprint_points=cost[1], cost_config=cost[2],
-                             dense=DenseConfig(guidance=guided, **polish), replan=args.replan,
-                             replan_spacing=replan_spacing_for(grid, args.replan_spacing,
-                                                               sd.expert_spacing),
-                             exact_check=(None if args.no_exact_rule
-                                          else exact_check_for(grid, footprint)))
+    hd = HierarchicalPlanner.for_map(grid, footprint, sd,
+                                     dense=DenseConfig(guidance=guided, **polish),
+                                     replan=args.replan, replan_spacing=args.replan_spacing,
+                                     exact=not args.no_exact_rule, model=args.dd_model)
     hd.plan(start, goal, generator=gen())  # warm-up
     plan = hd.plan(start, goal, generator=gen())
     # footprint outlines where DD fired

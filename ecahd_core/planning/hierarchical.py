@@ -144,6 +144,28 @@ class HierarchicalPlanner(DenseStage):
         self.backtracks = int(backtracks)
         self.sparse = sparse
 
+    @classmethod
+    def for_map(cls, grid, footprint, sd: SparseDiffusion, *, dense: DenseConfig | None = None,
+                replan: str = "every_waypoint", replan_spacing: float | None = None,
+                exact: bool = True, backtracks: int = BACKTRACKS, subgoals: bool = True,
+                settle: bool = True, model: str | None = None,
+                device: str = "cpu") -> "HierarchicalPlanner":
+        """Algorithm 1 on ``grid`` for ``footprint`` over ``sd`` (``SparseDiffusion.for_map``)
+        as ``ecahd plan`` and the benchmarks build it: the map's DD model (``model``: a path),
+        J from ``sd.cost``, the re-plans' spacing by the map and the model (``replan_spacing``
+        None; 0: off; ``horizon.replan_spacing_for``) and the exact rule (``exact``)."""
+        from ecahd_core.collision import exact_check_for
+        from ecahd_core.model_zoo import load_model
+        from ecahd_core.planning.horizon import replan_spacing_for
+
+        costmap, points, cost_config = sd.cost
+        return cls(sd, load_model("dd", grid, path=model, footprint=footprint),
+                   costmap=costmap, footprint_points=points, cost_config=cost_config,
+                   dense=dense, device=device, replan=replan,
+                   replan_spacing=replan_spacing_for(grid, replan_spacing, sd.expert_spacing),
+                   exact_check=exact_check_for(grid, footprint) if exact else None,
+                   backtracks=backtracks, subgoals=subgoals, settle=settle)
+
     @property
     def replan(self) -> str:
         """The re-plan policy (``SparseStage.replan``)."""

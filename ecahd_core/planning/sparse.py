@@ -290,6 +290,25 @@ class SparseDiffusion:
                           collision_costs=col, time_ms=(time.perf_counter() - t0) * 1e3,
                           placed=placed, first_leg=first_leg)
 
+    @classmethod
+    def for_map(cls, grid, footprint, config: SparseConfig | None = None, *, cost=None,
+                place_reach: float | None = None, model: str | None = None,
+                device: str = "cpu") -> "SparseDiffusion":
+        """SD on ``grid`` for ``footprint`` as the commands and benchmarks build it: the map's
+        model (``model``: a checkpoint path; None: the shipped one or one on $ECAHD_MODELS),
+        J's ``cost`` triple (None: built with the map's margin) and the placer of
+        ``place_reach`` [m] (None: by the map, ``placement.placer_for``; 0: off)."""
+        from ecahd_core.cost import CollisionCost
+        from ecahd_core.model_zoo import load_model
+        from ecahd_core.placement import placer_for
+
+        config = config or SparseConfig()
+        if cost is None:
+            cost = CollisionCost.build(grid, footprint).as_tuple()
+        ckpt = load_model("sd", grid, path=model, footprint=footprint, horizon=config.horizon)
+        return cls(ckpt, config, cost=cost, device=device,
+                   placer=placer_for(grid, footprint, place_reach))
+
     def on(self, *, cost=None, placer=None) -> "SparseDiffusion":
         """A view of this SD (the same model, sampler and settings) that weighs candidates by
         ``cost`` (J's (costmap, footprint points, CostConfig)) and places waypoints with
