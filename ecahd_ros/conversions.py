@@ -5,9 +5,10 @@ import json
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import Pose, PoseStamped
+from geometry_msgs.msg import Point, Pose, PoseStamped
 from nav_msgs.msg import OccupancyGrid, Path
 from std_msgs.msg import String
+from visualization_msgs.msg import Marker, MarkerArray
 
 from ecahd_core.maps import GridMap, grid_from_occupancy_message, to_occupancy_grid
 
@@ -81,3 +82,50 @@ def timing_message(stage: str, ms: float, stamp_s: float, **extra) -> String:
     """The ``ecahd/timing`` message: std_msgs/String with JSON {"stage", "ms", "stamp", ...}."""
     return String(data=json.dumps({"stage": stage, "ms": round(float(ms), 3), **extra,
                                    "stamp": stamp_s}))
+
+
+def candidate_markers(plan, frame_id: str, stamp) -> MarkerArray:
+    """SparsePlan (its candidates (N, P, 2) [m] and ``best``) -> MarkerArray: DELETEALL, then one LINE_STRIP per candidate (id = its index),
+    the chosen one purple and wider, the others translucent grey."""
+    out = MarkerArray()
+    clear = Marker()
+    clear.action = Marker.DELETEALL
+    out.markers.append(clear)
+    for i, cand in enumerate(plan.candidates):
+        m = Marker()
+        m.header.frame_id, m.header.stamp = frame_id, stamp
+        m.ns, m.id, m.type, m.action = "candidates", i, Marker.LINE_STRIP, Marker.ADD
+        m.pose.orientation.w = 1.0
+        chosen = i == plan.best
+        m.scale.x = 0.08 if chosen else 0.03
+        m.color.r, m.color.g, m.color.b, m.color.a = ((0.55, 0.2, 0.8, 1.0) if chosen
+                                                      else (0.5, 0.5, 0.5, 0.6))
+        for x, y in cand:
+            m.points.append(Point(x=float(x), y=float(y), z=0.0))
+        out.markers.append(m)
+    return out
+
+
+def footprint_markers(footprint, local: np.ndarray, frame_id: str, stamp,
+                      colliding: bool) -> MarkerArray:
+    """The footprint outline at each point of ``local`` (P, 2), facing along the path."""
+    out = MarkerArray()
+    clear = Marker()
+    clear.action = Marker.DELETEALL
+    out.markers.append(clear)
+    d = np.diff(local, axis=0)
+    heading = np.arctan2(d[:, 1], d[:, 0])
+    heading = np.append(heading, heading[-1])
+    outlines = footprint.transformed(local, heading, which="polygon")  # (P, V, 2)
+    for i, poly in enumerate(outlines):
+        m = Marker()
+        m.header.frame_id, m.header.stamp = frame_id, stamp
+        m.ns, m.id, m.type, m.action = "local_plan_footprints", i, Marker.LINE_STRIP, Marker.ADD
+        m.pose.orientation.w = 1.0
+        m.scale.x = 0.02
+        m.color.r, m.color.g, m.color.b, m.color.a = ((0.9, 0.1, 0.1, 1.0) if colliding
+                                                      else (0.1, 0.3, 0.9, 0.8))
+        for px, py in np.concatenate([poly, poly[:1]]):
+            m.points.append(Point(x=float(px), y=float(py), z=0.0))
+        out.markers.append(m)
+    return out

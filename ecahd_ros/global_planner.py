@@ -60,21 +60,21 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from geometry_msgs.msg import Point, PoseStamped
+from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import OccupancyGrid, Odometry, Path
 from rclpy.node import Node
 from std_msgs.msg import String
-from visualization_msgs.msg import Marker, MarkerArray
+from visualization_msgs.msg import MarkerArray
 
 from ecahd_core.errors import EcahdError, PlanningError
 from ecahd_core.planning.horizon import REPLAN_POLICIES
 from ecahd_core.planning.online import (ASTAR_SPACING, METHODS, GlobalRunnerConfig,
                                         OnlinePlanner, OnlinePlannerConfig, PlanOutcome)
-from ecahd_core.planning.sparse import SELECTION_RULES, SparseConfig, SparseDiffusion, SparsePlan
+from ecahd_core.planning.sparse import SELECTION_RULES, SparseConfig, SparseDiffusion
 from ecahd_core.threads import PRECISION_CHOICES
 from ecahd_core.validation import validate_pose
 from ecahd_ros.callbacks import check_frame, guard, now_seconds
-from ecahd_ros.conversions import msg_to_grid, timing_message, xy_to_path
+from ecahd_ros.conversions import candidate_markers, msg_to_grid, timing_message, xy_to_path
 from ecahd_ros.params import (ParamSpec, collision_cost, declare_parameters, make_robot,
                               read_parameters, require, require_cost_margin,
                               require_non_negative, require_positive, shared)
@@ -249,28 +249,6 @@ class GlobalPlannerParams:
                             max_spacing=self.max_spacing or None,
                             warm_fraction=self.warm_fraction,
                             precision=self.inference_precision, leg_batches=self.leg_batches)
-
-
-def candidate_markers(plan: SparsePlan, frame_id: str, stamp) -> MarkerArray:
-    """SparsePlan -> MarkerArray: DELETEALL, then one LINE_STRIP per candidate (id = its index),
-    the chosen one purple and wider, the others translucent grey."""
-    out = MarkerArray()
-    clear = Marker()
-    clear.action = Marker.DELETEALL
-    out.markers.append(clear)
-    for i, cand in enumerate(plan.candidates):
-        m = Marker()
-        m.header.frame_id, m.header.stamp = frame_id, stamp
-        m.ns, m.id, m.type, m.action = "candidates", i, Marker.LINE_STRIP, Marker.ADD
-        m.pose.orientation.w = 1.0
-        chosen = i == plan.best
-        m.scale.x = 0.08 if chosen else 0.03
-        m.color.r, m.color.g, m.color.b, m.color.a = ((0.55, 0.2, 0.8, 1.0) if chosen
-                                                      else (0.5, 0.5, 0.5, 0.6))
-        for x, y in cand:
-            m.points.append(Point(x=float(x), y=float(y), z=0.0))
-        out.markers.append(m)
-    return out
 
 
 class GlobalPlanner(Node):

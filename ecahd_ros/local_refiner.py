@@ -65,15 +65,14 @@ import time
 from dataclasses import dataclass
 from functools import partial
 
-import numpy as np
-from geometry_msgs.msg import Point, Twist, TwistStamped
+from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import OccupancyGrid, Odometry, Path
 from sensor_msgs.msg import LaserScan
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from std_msgs.msg import String
-from visualization_msgs.msg import Marker, MarkerArray
+from visualization_msgs.msg import MarkerArray
 
 from ecahd_core.collision_monitor import SLOWDOWN_PROFILES, CollisionMonitorConfig
 from ecahd_core.errors import EcahdError
@@ -82,8 +81,8 @@ from ecahd_core.planning.dense import DenseConfig, DenseStage
 from ecahd_core.sensing import PoseHistory
 from ecahd_core.worker import LatestWorker
 from ecahd_ros.callbacks import check_frame, guard, now_seconds
-from ecahd_ros.conversions import (layout_to_msg, msg_to_grid, path_to_xy, timing_message,
-                                   xy_to_path, yaw_from_quaternion)
+from ecahd_ros.conversions import (footprint_markers, layout_to_msg, msg_to_grid, path_to_xy,
+                                   timing_message, xy_to_path, yaw_from_quaternion)
 from ecahd_ros.params import (ParamSpec, collision_cost, declare_parameters, make_robot,
                               on_parameter_change, read_parameters, require,
                               require_cost_margin, require_non_negative, require_positive,
@@ -303,31 +302,6 @@ class LocalRefinerParams:
     @property
     def scan_offset(self) -> tuple[float, float, float]:
         return self.scan_offset_x, self.scan_offset_y, self.scan_offset_yaw
-
-
-def footprint_markers(footprint, local: np.ndarray, frame_id: str, stamp,
-                      colliding: bool) -> MarkerArray:
-    """The footprint outline at each point of ``local`` (P, 2), facing along the path."""
-    out = MarkerArray()
-    clear = Marker()
-    clear.action = Marker.DELETEALL
-    out.markers.append(clear)
-    d = np.diff(local, axis=0)
-    heading = np.arctan2(d[:, 1], d[:, 0])
-    heading = np.append(heading, heading[-1])
-    outlines = footprint.transformed(local, heading, which="polygon")  # (P, V, 2)
-    for i, poly in enumerate(outlines):
-        m = Marker()
-        m.header.frame_id, m.header.stamp = frame_id, stamp
-        m.ns, m.id, m.type, m.action = "local_plan_footprints", i, Marker.LINE_STRIP, Marker.ADD
-        m.pose.orientation.w = 1.0
-        m.scale.x = 0.02
-        m.color.r, m.color.g, m.color.b, m.color.a = ((0.9, 0.1, 0.1, 1.0) if colliding
-                                                      else (0.1, 0.3, 0.9, 0.8))
-        for px, py in np.concatenate([poly, poly[:1]]):
-            m.points.append(Point(x=float(px), y=float(py), z=0.0))
-        out.markers.append(m)
-    return out
 
 
 class LocalRefiner(Node):
