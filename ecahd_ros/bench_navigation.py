@@ -173,7 +173,7 @@ def parse_override(text: str) -> tuple[str, str, object]:
 def control_context() -> dict:
     """The controller and simulator limits every variant runs with (the nodes' defaults)."""
     from ecahd_ros.local_refiner import PARAMETERS as REFINER
-    from sim_bridge.node import PARAMETERS as SIM
+    from ecahd_ros.sim_bridge_params import PARAMETERS as SIM
 
     refiner = {s.name: s.default for s in REFINER}
     sim = {s.name: s.default for s in SIM}
