@@ -131,6 +131,7 @@ def test_select_best_paper_rule():
         select_best(c, goal, rule="best")
 
 
+@pytest.mark.slow
 def test_train_all_tiny(tmp_path):
     # the whole recipe at a thousandth of its steps on the small maze: dataset + 3 models
     assert main(["train-all", "--map", "maze2d-umaze", "--pairs", "6", "--steps-scale", "0.001",
@@ -142,6 +143,7 @@ def test_train_all_tiny(tmp_path):
         assert ckpt.training_state is None and ckpt.meta["dataset_pairs"] == 6
 
 
+@pytest.mark.slow
 def test_train_all_fits_its_steps_to_a_time_budget(tmp_path, capsys, monkeypatch):
     import re
 
@@ -181,6 +183,7 @@ def test_train_all_fits_its_steps_to_a_time_budget(tmp_path, capsys, monkeypatch
     assert main(args + ["--minutes", "1", "--steps-scale", "2"]) == 2  # one or the other
 
 
+@pytest.mark.slow
 def test_models_are_found_through_ecahd_models(tmp_path, monkeypatch):
     from ecahd_core.model_zoo import MODELS_DIR, model_search_path, shipped_path
 
@@ -227,6 +230,7 @@ def test_sd_gets_fourier_bands_down_to_half_a_metre_on_a_building_map_only():
     assert recipe("sd").denoiser_config(10, builtin_map("maze2d-large")).fourier_bands == 0
 
 
+@pytest.mark.slow
 def test_train_gives_sd_fourier_features_on_a_building_map_and_none_with_period_0(tmp_path):
     import torch
 
