@@ -77,6 +77,7 @@ def test_train_command_writes_full_and_shipped_checkpoints(tiny_sd):
     assert full.step == 3
 
 
+@pytest.mark.slow
 def test_resume_continues(tiny_sd, umaze_data, tmp_path):
     out, _ = tiny_sd
     _, data = umaze_data

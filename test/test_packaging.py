@@ -16,6 +16,7 @@ COLCON = shutil.which("colcon", path=os.pathsep.join([str(Path(sys.executable).p
                                                       os.environ.get("PATH", "")]))
 
 
+@pytest.mark.slow  # a subprocess importing every module (torch included)
 def test_core_import_does_not_load_rclpy():
     modules = sorted(".".join(p.relative_to(ROOT).with_suffix("").parts)
                      for p in (ROOT / "ecahd_core").rglob("*.py") if p.stem != "__init__")
