@@ -24,6 +24,8 @@ import tempfile
 import time
 from dataclasses import dataclass
 
+from ecahd_core.bench.output import write_json
+
 log = logging.getLogger("ecahd.bench.control")
 
 HELP = "cmd_vel inter-publish jitter of local_refiner while DD runs, against no DD"
@@ -172,8 +174,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         from dataclasses import asdict
 
-        with open(args.json, "w") as fh:
-            json.dump({"rate_hz": args.rate, "seconds": args.seconds,
-                       "runs": [asdict(r) for r in runs], "machine": machine_info()}, fh,
-                      indent=1)
+        write_json(args.json, {"rate_hz": args.rate, "seconds": args.seconds,
+                               "runs": [asdict(r) for r in runs], "machine": machine_info()},
+                   indent=1)
     return 0

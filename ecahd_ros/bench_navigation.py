@@ -40,6 +40,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ecahd_core.bench.output import write_json
+
 log = logging.getLogger("ecahd.bench.navigation")
 
 BEGIN = "<!-- bench-navigation:begin -->"
@@ -171,7 +173,7 @@ def parse_override(text: str) -> tuple[str, str, object]:
 def control_context() -> dict:
     """The controller and simulator limits every variant runs with (the nodes' defaults)."""
     from ecahd_ros.local_refiner import PARAMETERS as REFINER
-    from sim_bridge.node import PARAMETERS as SIM
+    from ecahd_ros.sim_bridge_params import PARAMETERS as SIM
 
     refiner = {s.name: s.default for s in REFINER}
     sim = {s.name: s.default for s in SIM}
@@ -463,13 +465,13 @@ def run(args: argparse.Namespace) -> int:
     print(md)
     print(f"runs: {out}")
     out.mkdir(parents=True, exist_ok=True)
-    (out / "navigation.json").write_text(json.dumps(result.to_dict(), indent=2) + "\n")
+    write_json(out / "navigation.json", result.to_dict())
     (out / "navigation.md").write_text(md)
-    for path, text in ((args.json, json.dumps(result.to_dict(), indent=2) + "\n"),
-                       (args.md, md)):
-        if path:
-            Path(path).parent.mkdir(parents=True, exist_ok=True)
-            Path(path).write_text(text)
+    if args.json:
+        write_json(args.json, result.to_dict())
+    if args.md:
+        Path(args.md).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.md).write_text(md)
     if args.results:
         write_results(args.results, results_block(result))
         print(f"updated {args.results}")

@@ -11,9 +11,10 @@ import importlib
 import json
 from pathlib import Path
 
-# node name -> module holding its PARAMETERS list
+# node name -> module holding its PARAMETERS list (sim_bridge's are declared on the ROS side, so
+# rendering them does not import the simulator)
 NODES = {
-    "sim_bridge": "sim_bridge.node",
+    "sim_bridge": "ecahd_ros.sim_bridge_params",
     "global_planner": "ecahd_ros.global_planner",
     "local_refiner": "ecahd_ros.local_refiner",
     "bag_recorder": "ecahd_ros.bag_recorder",

@@ -35,6 +35,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ecahd_core.bench.output import write_json
+
 log = logging.getLogger("ecahd.eval_bag")
 
 TOPICS = ("/map", "/goal_pose", "/odom", "/collision", "/collision_detail", "/cmd_vel",
@@ -226,9 +228,7 @@ def write_outputs(result: BagEvaluation, bag, *, json_path=None, md_path=None,
 
     table = markdown_table(result.summary, result.metrics) + notes
     if json_path:
-        Path(json_path).parent.mkdir(parents=True, exist_ok=True)
-        Path(json_path).write_text(json.dumps({**result.to_dict(str(bag)), **(extra or {})},
-                                              indent=2) + "\n")
+        write_json(json_path, {**result.to_dict(str(bag)), **(extra or {})})
     if md_path:
         Path(md_path).parent.mkdir(parents=True, exist_ok=True)
         Path(md_path).write_text(f"# Closed-loop evaluation of `{bag}`\n\n"

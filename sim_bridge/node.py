@@ -85,47 +85,15 @@ from ecahd_core.errors import EcahdError
 from ecahd_core.scenario import Obstacle, read_scenario
 from ecahd_ros.conversions import grid_to_msg, pose_from_xy_yaw, yaw_from_quaternion
 from ecahd_ros.qos import MAP_QOS, STREAM_QOS, VIZ_QOS
-from ecahd_ros.params import (ParamSpec, declare_parameters, read_parameters, require,
-                              require_non_negative, require_positive, shared)
+from ecahd_ros.params import (declare_parameters, read_parameters, require, require_non_negative,
+                              require_positive)
+from ecahd_ros.sim_bridge_params import PARAMETERS  # every parameter of the node, declared once
 from ecahd_ros.spin import spin_node
 from sim_bridge.sim import WALL_HEIGHT, MazeSim, SimConfig, SimError, SimState, scan_angles
 
 CAMERA_SIZE = 256  # [px] longer side of the top-down image
 MAP_FRAME = "map"
 BASE_FRAME = "base_link"
-
-# one place for every parameter of the node
-PARAMETERS = [
-    ParamSpec("map", "maze2d-large", "built-in maze (maze2d-umaze, maze2d-medium, maze2d-large) or Nav2 "
-                            "map YAML path"),
-    ParamSpec("resolution", 0.1, "[m/cell] rasterisation of built-in mazes"),
-    ParamSpec("robot", "circle", "footprint preset: circle, quadruped, humanoid"),
-    ParamSpec("footprint", "", "Nav2 footprint polygon '[[x, y], ...]' [m]; overrides robot when set"),
-    ParamSpec("start_x", 1.5, "[m] initial x in the map frame"),
-    ParamSpec("start_y", 1.5, "[m] initial y in the map frame"),
-    ParamSpec("start_yaw", 0.0, "[rad] initial heading"),
-    ParamSpec("rate_hz", 50.0, "simulation steps per second of simulated time"),
-    ParamSpec("control_timeout", 0.5, "[s of sim time] a cmd_vel older than this stops the robot"),
-    ParamSpec("max_v", 1.0, "[m/s] limit on |linear velocity|"),
-    ParamSpec("max_w", 2.0, "[rad/s] limit on |angular velocity|"),
-    ParamSpec("realtime_factor", 1.0, "simulated seconds per wall second; 0 or less = as fast as possible"),
-    ParamSpec("publish_camera", False, "publish a top-down rgb8 image on camera/image_raw"),
-    ParamSpec("camera_rate_hz", 1.0, "[Hz of sim time] top-down image rate"),
-    ParamSpec("enable_stamped_cmd_vel", False, "cmd_vel is geometry_msgs/TwistStamped instead of Twist"),
-    ParamSpec("publish_scan", True, "publish a 2D LiDAR sensor_msgs/LaserScan on scan"),
-    ParamSpec("scan_rate_hz", 10.0, "[Hz of sim time] scan rate (and sim_obstacles marker rate)"),
-    ParamSpec("scan_beams", 360, "beams per scan over a full turn (angle_min -pi, "
-                                 "increment 2 pi / beams)"),
-    ParamSpec("scan_range_min", 0.1, "[m] closer returns read -inf (REP 117)"),
-    ParamSpec("scan_range_max", 8.0, "[m] no return within it reads +inf (REP 117)"),
-    ParamSpec("scan_noise_std", 0.0, "[m] standard deviation of Gaussian range noise"),
-    *shared("scan_offset_x", "scan_offset_y", "scan_offset_yaw"),
-    ParamSpec("scan_frame_id", "base_scan", "header.frame_id of the scans"),
-    ParamSpec("seed", 0, "seed of the simulator's random generator (scan noise)"),
-    ParamSpec("obstacles_file", "", "scenario YAML of obstacles that are not on the map "
-                                    "('' = none); dynamic: setting it replaces the obstacles "
-                                    "(moving ones set off again)"),
-]
 
 
 @dataclass(frozen=True, kw_only=True)

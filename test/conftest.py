@@ -1,6 +1,15 @@
 """Test-wide settings: keep ROS 2 discovery on this machine, plots headless, and one private
 rclpy context per test on a DDS domain of this test process (parallel runs do not hear each
-other). Core tests never use the ``ros_context`` fixture, so they never import rclpy."""
+other). Core tests never use the ``ros_context`` fixture, so they never import rclpy.
+
+Tests that take seconds each (node processes and process graphs, colcon builds, training runs,
+closed-loop demos) are marked ``slow`` (``pytestmark = pytest.mark.slow`` or
+``@pytest.mark.slow``; the marker is registered in setup.cfg). While working, run the rest, in
+under a minute on two cores::
+
+    python -m pytest -q -m "not slow"
+
+``bash scripts/test.sh`` (what CI runs) still runs everything, the slow tests included."""
 import os
 
 import pytest

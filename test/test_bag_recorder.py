@@ -140,6 +140,7 @@ def test_existing_output_is_refused_and_nothing_is_overwritten(ros_context, tmp_
         read_bag(tmp_path)
 
 
+@pytest.mark.slow
 def test_sigint_closes_the_bag(ros_context, ros_domain_id, tmp_path):
     bag = tmp_path / "bag"
     env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain_id))

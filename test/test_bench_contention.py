@@ -37,6 +37,7 @@ def gone(pid: int) -> bool:
     return False
 
 
+@pytest.mark.slow
 def test_quick_run_writes_every_cell_and_leaves_no_hog(tmp_path, capsys):
     out = tmp_path / "contention.json"
     threads_before = torch.get_num_threads()

@@ -7,6 +7,7 @@ import pytest
 pytest.importorskip("rclpy")
 
 
+@pytest.mark.slow
 def test_a_short_run_times_every_tick(ros_domain_id):
     from ecahd_ros.bench_control import run_once
 

@@ -88,6 +88,7 @@ def test_bench_navigation_is_an_ecahd_bench_subcommand_beside_the_core_ones():
         parser.parse_args(["bench", "navigation", "--variants", "rrt"])
 
 
+@pytest.mark.slow
 def test_one_tiny_run_writes_json_md_and_results(tmp_path):
     # one short episode of the A* baseline (no diffusion model at all on the global side)
     results = tmp_path / "RESULTS.md"

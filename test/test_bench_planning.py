@@ -12,6 +12,7 @@ KEYS = {"method", "guidance", "robot", "success", "success_final", "collision_fr
         "dd_ratio"}
 
 
+@pytest.mark.slow
 def test_bench_planning_small(tmp_path):
     js, md, png = tmp_path / "p.json", tmp_path / "p.md", tmp_path / "p.png"
     assert main(["bench", "planning", "--problems", "2", "--robots", "quadruped", "--no-progress",
@@ -53,6 +54,7 @@ def test_bench_defaults_follow_the_planner():
     assert PlanningBenchSettings().leg_batches == SparseConfig().leg_batches
 
 
+@pytest.mark.slow
 def test_safety_net_is_reported_beside_hd_and_leaves_its_numbers_alone():
     from ecahd_core.bench.planning import (PlanningBenchSettings, format_markdown,
                                            run_planning_benchmark)
@@ -119,6 +121,7 @@ def test_replan_spacing_is_reported_per_robot_when_the_models_differ():
     assert _spacing_text({"circle": 6.5, "quadruped": None}) == "robot (circle 6.5 m, quadruped off)"
 
 
+@pytest.mark.slow
 def test_per_problem_seeds_reseed_each_problem_and_report_each_problem():
     from ecahd_core.bench.planning import (PlanningBenchSettings, format_markdown,
                                            run_planning_benchmark)

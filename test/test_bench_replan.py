@@ -3,7 +3,7 @@ import json
 
 import pytest
 
-from ecahd_core.bench.replan import ReplanBenchSettings, format_table, run_replan_benchmark
+from ecahd_core.bench.replan import ReplanBenchSettings, load_bench_map, run_replan_benchmark
 from ecahd_core.errors import EcahdError
 
 
@@ -29,11 +29,30 @@ def test_bench_replan_measures_and_its_references_agree(tmp_path, capsys):
             assert r["detour_m"] < 1.1 * r["detour_ref_m"]
 
 
-def test_bench_replan_settings_are_validated():
-    with pytest.raises(EcahdError, match="problems"):
-        ReplanBenchSettings(problems=0)
-    with pytest.raises(EcahdError, match="box"):
-        ReplanBenchSettings(box=float("nan"))
+@pytest.mark.parametrize("setting, bad", [
+    ("problems", 0), ("problems", -3), ("repeats", 0), ("obstacles", -1),
+    ("box", 0.0), ("box", -0.5), ("box", float("nan")), ("box", float("inf")),
+    ("min_distance", -1.0), ("min_distance", float("nan")), ("min_distance", float("inf")),
+])
+def test_bench_replan_settings_are_validated(setting, bad):
+    # a bad value is rejected with an error that names the setting (and no other)
+    with pytest.raises(EcahdError, match=rf"^bench replan: {setting} must be") as info:
+        ReplanBenchSettings(**{setting: bad})
+    others = {"problems", "repeats", "obstacles", "box", "min_distance"} - {setting}
+    assert not any(name in str(info.value) for name in others), str(info.value)
+
+
+def test_bench_replan_accepts_good_settings_and_rejects_a_bad_map():
+    # the least values each check allows, and the defaults, are accepted as given
+    edge = dict(problems=1, repeats=1, obstacles=0, box=1e-3, min_distance=0.0)
+    settings = ReplanBenchSettings(**edge)
+    assert {name: getattr(settings, name) for name in edge} == edge
+    assert ReplanBenchSettings().problems >= 1 and ReplanBenchSettings().box > 0
+    # a generated building: KIND:WxH:RES:SEED, W x H [m] at RES [m/cell]
+    grid = load_bench_map("office:16x12:0.05:3")
+    assert grid.data.shape == (240, 320) and grid.resolution == pytest.approx(0.05)
+    # a malformed spec names the expected form; the benchmark checks it before any work
+    with pytest.raises(EcahdError, match="KIND:WxH:RES:SEED"):
+        load_bench_map("office:axb:0.05:1")
     with pytest.raises(EcahdError, match="KIND:WxH:RES:SEED"):
         run_replan_benchmark(ReplanBenchSettings(map="office:axb:0.05:1"), progress=False)
-    assert callable(format_table)

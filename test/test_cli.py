@@ -25,6 +25,7 @@ def test_plan_astar_writes_png_and_json(tmp_path):
     assert r["success"] and r["collision_free"] and r["timings_ms"]["total"] > 0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("flags, polished", [([], True),
                                              (["--polish-steps", "0", "--no-keep-better",
                                                "--selection", "shortest_reaching"], False)])
@@ -71,6 +72,7 @@ def test_shipped_nav2_map_matches_builtin():
     assert np.array_equal(load_nav2_yaml(shipped).occupied, builtin_map("maze2d-large").occupied)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("replan", ["once", "every_waypoint"])
 def test_plan_ecahd_replan_policies_and_the_safety_net_record(tmp_path, replan):
     rec = tmp_path / "p.json"
@@ -100,6 +102,7 @@ def test_plan_ecahd_with_warm_started_replans(tmp_path, capsys):
     assert "warm_fraction" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_plan_sd_through_walls_is_repaired_by_the_fallback(tmp_path):
     # SD alone, its waypoints joined by straight lines, clips a wall near the start for the
     # circle robot (seed 0); the net splices A* in over that stretch
@@ -118,6 +121,7 @@ def test_plan_sd_through_walls_is_repaired_by_the_fallback(tmp_path):
     assert np.allclose(traj[0], [1.5, 1.5]) and np.allclose(traj[-1], [10.5, 7.5])
 
 
+@pytest.mark.slow
 def test_plan_places_sd_waypoints_out_of_walls_when_asked(tmp_path):
     from ecahd_core.footprint import make_footprint
     from ecahd_core.maps import load_map
@@ -136,6 +140,7 @@ def test_plan_places_sd_waypoints_out_of_walls_when_asked(tmp_path):
     assert main(args + ["--place-reach", "-1"]) == 2  # a clear error, exit code 2
 
 
+@pytest.mark.slow
 def test_plan_without_a_safe_plan_exits_2_and_still_writes_the_record(tmp_path, capsys):
     # goal (1.5, 1.1) in maze2d-large's first cell: free, but 0.1 m from the wall below, so the
     # 0.4 m circle collides there whatever the path, and A* (clearance 0.4 m) cannot end there

@@ -9,6 +9,8 @@ from ecahd_ros import eval_bag
 from ecahd_ros.bag_recorder import DEFAULT_TOPICS, read_bag
 from ecahd_ros.demo import DemoConfig, run_demo
 
+pytestmark = pytest.mark.slow  # the closed loop: node processes, a recorded bag
+
 # (1.5, 1.5) -> (2.5, 1.5): 1 m along the bottom-left corridor of maze2d-large
 START, GOAL = (1.5, 1.5), (2.5, 1.5)
 

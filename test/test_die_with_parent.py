@@ -15,6 +15,7 @@ PARENT = ("import os, subprocess, sys, time; "
           "print(p.pid, flush=True); time.sleep(60)")
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="prctl(PR_SET_PDEATHSIG)")
 def test_a_node_process_dies_with_the_process_that_started_it():
     parent = subprocess.Popen([sys.executable, "-c", PARENT], stdout=subprocess.PIPE, text=True)

@@ -72,6 +72,7 @@ def toy_problems(n=64, seed=1):
     return start, goal
 
 
+@pytest.mark.slow
 def test_training_lowers_loss_and_learns_straight_lines(toy):
     losses = [loss for _, loss in toy.loss_history]
     assert toy.step == 1000 and len(losses) == 20
@@ -93,6 +94,7 @@ def test_training_lowers_loss_and_learns_straight_lines(toy):
         assert dev.max() < 0.5  # eta = 1, measured max: 0.09 / 0.23 m
 
 
+@pytest.mark.slow
 def test_checkpoint_round_trip_gives_identical_samples(toy, tmp_path):
     ckpt = load_checkpoint(toy.path, expect={"kind": "dd", **META})
     assert ckpt.step == 1000 and ckpt.kind == "dd" and ckpt.horizons == (4, 6)
@@ -196,6 +198,7 @@ def test_fourier_checkpoint_round_trip_gives_identical_samples(tmp_path):
     assert torch.equal(ref.trajectories, got.trajectories)
 
 
+@pytest.mark.slow
 def test_checkpoint_without_architecture_loads_as_transformer(toy, tmp_path):
     # checkpoints written before DenoiserConfig.architecture existed (the shipped SD and DD)
     payload = torch.load(toy.path, weights_only=True)
@@ -212,6 +215,7 @@ def test_checkpoint_without_architecture_loads_as_transformer(toy, tmp_path):
     torch.testing.assert_close(model(x, 10), toy.ema_model(x, 10), rtol=0, atol=0)
 
 
+@pytest.mark.slow
 def test_checkpoint_of_another_map_or_kind_is_refused(toy):
     with pytest.raises(CheckpointError, match="trained for map 'toy-4x4' \\(fingerprint "
                                               "0123456789abcdef\\), not 'maze2d-umaze'"):
@@ -228,6 +232,7 @@ def test_checkpoint_of_another_map_or_kind_is_refused(toy):
     load_checkpoint(toy.path, expect={"horizons": (4, 6)})  # tuples and lists compare equal
 
 
+@pytest.mark.slow
 def test_unreadable_checkpoints_raise_checkpoint_error(toy, tmp_path):
     with pytest.raises(CheckpointError, match="does not exist"):
         load_checkpoint(tmp_path / "missing.pt")
@@ -309,6 +314,7 @@ def test_a_time_limit_stops_training_early_and_keeps_a_whole_checkpoint(tmp_path
         TrainConfig(steps=1, time_limit_s=0)
 
 
+@pytest.mark.slow
 def test_bf16_training_runs_under_autocast_and_keeps_float32_weights(tmp_path):
     """precision="bf16": the forward pass runs in bfloat16 (so the weights differ from the
     float32 run's), the loss falls as in float32, and weights and EMA stay float32."""
@@ -425,6 +431,7 @@ def _free_port():
         return s.getsockname()[1]
 
 
+@pytest.mark.slow
 def test_ddp_on_two_cpu_processes_writes_one_checkpoint(tmp_path):
     script = tmp_path / "ddp_train.py"
     script.write_text(DDP_SCRIPT)

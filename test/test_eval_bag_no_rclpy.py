@@ -113,6 +113,7 @@ def write_bag(path, *, new_records: bool = True) -> None:
                          TS.serialize_cdr(msg, msgtype))
 
 
+@pytest.mark.slow
 def test_eval_bag_scores_a_bag_with_rclpy_and_ros_messages_blocked(tmp_path):
     bag, out, md = tmp_path / "bag", tmp_path / "m.json", tmp_path / "m.md"
     write_bag(bag)

@@ -77,6 +77,7 @@ def test_train_command_writes_full_and_shipped_checkpoints(tiny_sd):
     assert full.step == 3
 
 
+@pytest.mark.slow
 def test_resume_continues(tiny_sd, umaze_data, tmp_path):
     out, _ = tiny_sd
     _, data = umaze_data
@@ -131,17 +132,40 @@ def test_select_best_paper_rule():
         select_best(c, goal, rule="best")
 
 
-def test_train_all_tiny(tmp_path):
-    # the whole recipe at a thousandth of its steps on the small maze: dataset + 3 models
+@pytest.fixture(scope="module")
+def umaze_models(tmp_path_factory):
+    """The folder of the inference-only SD, DD and FD models that ``ecahd train-all`` makes on
+    the small maze at a thousandth of the recipes' steps (dataset + 3 models, the slowest part
+    of this file: made once, for the tests that need trained files)."""
+    root = tmp_path_factory.mktemp("train_all")
     assert main(["train-all", "--map", "maze2d-umaze", "--pairs", "6", "--steps-scale", "0.001",
-                 "--work-dir", str(tmp_path / "work"), "--out-dir", str(tmp_path / "models"),
+                 "--work-dir", str(root / "work"), "--out-dir", str(root / "models"),
                  "--no-progress", "--kinds", "sd", "dd", "fd"]) == 0
+    return root / "models"
+
+
+@pytest.mark.slow
+def test_train_all_tiny(umaze_models):
+    # the whole recipe at a thousandth of its steps on the small maze: dataset + 3 models
+    assert sorted(p.name for p in umaze_models.iterdir()) == [
+        "maze2d-umaze_dd.pt", "maze2d-umaze_fd.pt", "maze2d-umaze_sd.pt"]
     grid = builtin_map("maze2d-umaze")
     for kind in ("sd", "dd", "fd"):
-        ckpt = load_model(kind, grid, path=tmp_path / "models" / f"maze2d-umaze_{kind}.pt")
+        ckpt = load_model(kind, grid, path=umaze_models / f"maze2d-umaze_{kind}.pt")
         assert ckpt.training_state is None and ckpt.meta["dataset_pairs"] == 6
 
 
+def test_train_all_trains_sd_and_dd_by_default():
+    import argparse
+
+    from ecahd_core.commands.train import add_all_arguments
+
+    parser = argparse.ArgumentParser()
+    add_all_arguments(parser)
+    assert parser.parse_args([]).kinds == ["sd", "dd"]  # what ECAHD needs; FD on request
+
+
+@pytest.mark.slow
 def test_train_all_fits_its_steps_to_a_time_budget(tmp_path, capsys, monkeypatch):
     import re
 
@@ -181,21 +205,17 @@ def test_train_all_fits_its_steps_to_a_time_budget(tmp_path, capsys, monkeypatch
     assert main(args + ["--minutes", "1", "--steps-scale", "2"]) == 2  # one or the other
 
 
-def test_models_are_found_through_ecahd_models(tmp_path, monkeypatch):
+@pytest.mark.slow
+def test_models_are_found_through_ecahd_models(umaze_models, tmp_path, monkeypatch):
     from ecahd_core.model_zoo import MODELS_DIR, model_search_path, shipped_path
 
     grid = builtin_map("maze2d-umaze")
     monkeypatch.delenv("ECAHD_MODELS", raising=False)
     with pytest.raises(CheckpointError, match="no 'sd' model for map 'maze2d-umaze'.*ECAHD_MODELS"):
         load_model("sd", grid)
-    assert main(["train-all", "--map", "maze2d-umaze", "--pairs", "6", "--steps-scale", "0.001",
-                 "--work-dir", str(tmp_path / "work"), "--out-dir", str(tmp_path / "mine"),
-                 "--no-progress"]) == 0  # SD and DD by default
-    assert sorted(p.name for p in (tmp_path / "mine").iterdir()) == [
-        "maze2d-umaze_dd.pt", "maze2d-umaze_sd.pt"]
-    monkeypatch.setenv("ECAHD_MODELS", f"{tmp_path / 'empty'}:{tmp_path / 'mine'}")
-    assert model_search_path() == [tmp_path / "empty", tmp_path / "mine", MODELS_DIR]
-    assert shipped_path("maze2d-umaze", "sd") == tmp_path / "mine" / "maze2d-umaze_sd.pt"
+    monkeypatch.setenv("ECAHD_MODELS", f"{tmp_path / 'empty'}:{umaze_models}")
+    assert model_search_path() == [tmp_path / "empty", umaze_models, MODELS_DIR]
+    assert shipped_path("maze2d-umaze", "sd") == umaze_models / "maze2d-umaze_sd.pt"
     assert load_model("sd", grid).meta["dataset_pairs"] == 6
     # the package's own models stay found behind the others
     assert shipped_path("maze2d-large", "sd") == MODELS_DIR / "maze2d-large_sd.pt"
@@ -227,6 +247,7 @@ def test_sd_gets_fourier_bands_down_to_half_a_metre_on_a_building_map_only():
     assert recipe("sd").denoiser_config(10, builtin_map("maze2d-large")).fourier_bands == 0
 
 
+@pytest.mark.slow
 def test_train_gives_sd_fourier_features_on_a_building_map_and_none_with_period_0(tmp_path):
     import torch
 

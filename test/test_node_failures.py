@@ -18,6 +18,7 @@ from rosgraph_msgs.msg import Clock  # noqa: E402
 from ecahd_ros.spin import CONFIGURE_EXIT_CODE, spin_forever  # noqa: E402
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("module,params,reason", [
     ("ecahd_ros.global_planner", ["method:=rrt"], "parameter method must be one of"),
     ("ecahd_ros.global_planner", ["robot:=spaceship"], "spaceship"),

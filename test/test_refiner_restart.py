@@ -21,6 +21,8 @@ from ecahd_ros.global_planner import GlobalPlanner  # noqa: E402
 from ecahd_ros.local_refiner import LocalRefiner  # noqa: E402
 from sim_bridge.node import SimBridge  # noqa: E402
 
+pytestmark = pytest.mark.slow  # three nodes driving a robot for seconds of sim time
+
 # maze2d-large: the corridor y in [5, 6] is free for x in [1, 7]
 START, GOAL = (1.5, 5.5), (5.5, 5.5)
 # 4 saturated one process on a 2-core AMD EPYC CI machine: the local stage (DD) took 1-2 s

@@ -50,6 +50,7 @@ def test_plan_sd_command(tmp_path):
     assert r["timings_ms"]["sd"] > 0
 
 
+@pytest.mark.slow
 def test_bench_sampling_json(tmp_path):
     out = tmp_path / "s.json"
     assert main(["bench", "sampling", "--repeats", "1", "--json", str(out)]) == 0

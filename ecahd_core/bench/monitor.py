@@ -328,7 +328,7 @@ def run(args: argparse.Namespace) -> int:
     result = run_monitor_benchmark(settings)
     print(format_table(result))
     if args.json:
-        from ecahd_core.commands.bench import _write_json
+        from ecahd_core.bench.output import write_json
 
-        _write_json(args.json, result.to_dict())
+        write_json(args.json, result.to_dict())
     return 0

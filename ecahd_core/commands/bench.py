@@ -15,7 +15,6 @@ imported when a benchmark runs, so ``ecahd --help`` stays fast.
 from __future__ import annotations
 
 import argparse
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -24,8 +23,8 @@ from ecahd_core.bench import contention as bench_contention
 from ecahd_core.bench import monitor as bench_monitor
 from ecahd_core.bench import replan as bench_replan
 from ecahd_core.bench.cost import CostBenchSettings
+from ecahd_core.bench.output import write_json
 from ecahd_core.commands.plan import add_replan_argument
-from ecahd_core.errors import EcahdError
 from ecahd_core.threads import add_precision_argument, add_threads_argument, set_torch_threads
 
 
@@ -48,13 +47,6 @@ def _int_at_least(minimum: int):
             raise argparse.ArgumentTypeError(f"must be >= {minimum}, got {value}")
         return value
     return parse
-
-
-def _write_json(path: str, payload: dict) -> None:
-    try:
-        Path(path).write_text(json.dumps(payload, indent=2) + "\n")
-    except OSError as exc:
-        raise EcahdError(f"cannot write the JSON result to {path!r}: {exc}") from exc
 
 
 # ------------------------------------------------------------------------------------ cost
@@ -88,7 +80,7 @@ def _run_cost(args: argparse.Namespace) -> int:
     result = run_cost_benchmark(settings)
     print(format_table(result))
     if args.json:
-        _write_json(args.json, result.to_dict())
+        write_json(args.json, result.to_dict())
     return 0
 
 
@@ -118,7 +110,7 @@ def _run_sampling(args: argparse.Namespace) -> int:
     result = run_sampling_benchmark(settings, models=models)
     print(format_table(result))
     if args.json:
-        _write_json(args.json, result.to_dict())
+        write_json(args.json, result.to_dict())
     return 0
 
 
@@ -166,7 +158,7 @@ def _run_sd_quality(args: argparse.Namespace) -> int:
         plot_plans(grid, problems[:8], plans[:8], args.png)
         print(f"figure: {args.png}")
     if args.json:
-        _write_json(args.json, metrics.to_dict())
+        write_json(args.json, metrics.to_dict())
     return 0
 
 
@@ -278,7 +270,7 @@ def _run_planning(args: argparse.Namespace) -> int:
     if args.md:
         Path(args.md).write_text(md)
     if args.json:
-        _write_json(args.json, {"context": result.context,
+        write_json(args.json, {"context": result.context,
                                 "cells": [c.to_dict() for c in result.cells],
                                 "ablation": [c.to_dict() for c in result.ablation]})
     if args.png:
@@ -292,7 +284,7 @@ def _run_contention(args: argparse.Namespace) -> int:
     result = bench_contention.run_contention_benchmark(bench_contention.settings_from_args(args))
     print(bench_contention.format_table(result))
     if args.json:
-        _write_json(args.json, result.to_dict())
+        write_json(args.json, result.to_dict())
     return 0
 
 

@@ -18,12 +18,11 @@ collision-free is written for diagnosis, labelled unsafe, and the command exits 
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 
+from ecahd_core.bench.output import write_json
 from ecahd_core.commands import add_map_arguments
 from ecahd_core.errors import EcahdError
 from ecahd_core.threads import add_precision_argument, resolve_precision
@@ -205,8 +204,7 @@ def run(args: argparse.Namespace) -> int:
             "resampled_plans": 0 if safe is None else safe.resampled,
             "unsafe_reason": None if safe is None or safe.safe else safe.reason,
         }
-        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.json).write_text(json.dumps(record, indent=1))
+        write_json(args.json, record, indent=1)
         print(f"record: {args.json}")
     if safe is not None and not safe.safe:
         raise EcahdError(f"no safe plan: {safe.reason} (the plan written above is unsafe)")
