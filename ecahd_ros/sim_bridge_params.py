@@ -38,3 +38,6 @@ PARAMETERS = [
                                     "('' = none); dynamic: setting it replaces the obstacles "
                                     "(moving ones set off again)"),
 ]
+
+# parameters that can be set at run time (the others are read-only)
+DYNAMIC = ("obstacles_file",)

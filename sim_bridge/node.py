@@ -87,7 +87,7 @@ from ecahd_ros.conversions import grid_to_msg, pose_from_xy_yaw, yaw_from_quater
 from ecahd_ros.qos import MAP_QOS, STREAM_QOS, VIZ_QOS
 from ecahd_ros.params import (declare_parameters, read_parameters, require, require_non_negative,
                               require_positive)
-from ecahd_ros.sim_bridge_params import PARAMETERS  # every parameter of the node, declared once
+from ecahd_ros.sim_bridge_params import DYNAMIC, PARAMETERS  # every parameter, declared once
 from ecahd_ros.spin import spin_node
 from sim_bridge.sim import WALL_HEIGHT, MazeSim, SimConfig, SimError, SimState, scan_angles
 
@@ -208,7 +208,7 @@ class SimBridge(Node):
             raise
 
     def _configure(self) -> None:
-        declare_parameters(self, PARAMETERS, dynamic=("obstacles_file",))
+        declare_parameters(self, PARAMETERS, dynamic=DYNAMIC)
         self.rejected_commands = 0  # cmd_vel messages ignored as malformed
         self._cmd = (0.0, 0.0)  # (v [m/s], w [rad/s])
         self._cmd_time: float | None = None  # [s of sim time] when _cmd arrived
