@@ -21,6 +21,9 @@ import numpy as np
 
 from ecahd_core.errors import MapError, PlanningError
 
+# the map the shipped models learnt: every command's and node's default
+DEFAULT_MAP = "maze2d-large"
+
 UNKNOWN = -1
 FREE = 0
 OCCUPIED = 100

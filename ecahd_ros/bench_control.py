@@ -24,6 +24,7 @@ import tempfile
 import time
 from dataclasses import dataclass
 
+from ecahd_core.maps import DEFAULT_MAP
 from ecahd_core.bench.output import write_json
 
 log = logging.getLogger("ecahd.bench.control")
@@ -88,7 +89,7 @@ def run_once(*, dd_enabled: bool, seconds: float, rate: float, domain: int) -> C
         odom_pub = probe.create_publisher(Odometry, "odom", STREAM_QOS)
         executor = SingleThreadedExecutor(context=ctx)
         executor.add_node(probe)
-        map_pub.publish(grid_to_msg(builtin_map("maze2d-large")))
+        map_pub.publish(grid_to_msg(builtin_map(DEFAULT_MAP)))
         deadline = time.monotonic() + 60.0
         while not any(r.get("map_ready") for r in records):  # the refiner's cost map is built
             executor.spin_once(timeout_sec=0.01)

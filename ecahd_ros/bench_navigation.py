@@ -40,6 +40,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ecahd_core.maps import DEFAULT_MAP
 from ecahd_core.bench.output import write_json
 
 log = logging.getLogger("ecahd.bench.navigation")
@@ -84,7 +85,7 @@ class NavigationBenchSettings:
     episodes: int = 3
     seed: int = 0
     robot: str = "circle"
-    map: str = "maze2d-large"
+    map: str = DEFAULT_MAP
     variants: tuple[str, ...] = TABLE_III_VARIANTS
     realtime_factor: float = 1.0
     max_steps: int = 800

@@ -46,6 +46,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ecahd_core.maps import DEFAULT_MAP
+
 log = logging.getLogger("ecahd.demo")
 
 STARTUP_TIMEOUT = 120.0  # [s wall] processes up, models loaded and recorder subscribed
@@ -63,7 +65,7 @@ class DemoConfig:
     first_episode: int = 0  # run the seeded episodes first_episode .. + episodes - 1 (start:
     #   the goal before the first one; its obstacles: the same seed as in a full run)
     robot: str = "circle"
-    map: str = "maze2d-large"
+    map: str = DEFAULT_MAP
     seed: int = 0
     realtime_factor: float = 1.0
     max_steps: int = 800
@@ -119,7 +121,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--episodes", type=int, default=3, help="goals to drive to")
     p.add_argument("--robot", default="circle",
                    help="footprint: circle | quadruped | humanoid | Nav2 polygon '[[x, y], ...]'")
-    p.add_argument("--map", default="maze2d-large",
+    p.add_argument("--map", default=DEFAULT_MAP,
                    help="built-in maze or Nav2 map YAML (models: shipped, or --models)")
     p.add_argument("--models", default=None, metavar="DIR",
                    help="folder of <map name>_{sd,dd,fd}.pt, as `ecahd train-all --out-dir` "

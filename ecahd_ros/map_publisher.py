@@ -15,14 +15,14 @@ from rclpy.node import Node
 from nav_msgs.msg import OccupancyGrid
 
 from ecahd_core.errors import EcahdError
-from ecahd_core.maps import GridMap, load_map
+from ecahd_core.maps import DEFAULT_MAP, GridMap, load_map
 from ecahd_ros.conversions import grid_to_msg
 from ecahd_ros.qos import MAP_QOS
 from ecahd_ros.params import ParamSpec, declare_parameters
 from ecahd_ros.spin import spin_node
 
 PARAMETERS = [
-    ParamSpec("map", "maze2d-large", "built-in maze name or path to a Nav2 map YAML"),
+    ParamSpec("map", DEFAULT_MAP, "built-in maze name or path to a Nav2 map YAML"),
     ParamSpec("resolution", 0.1, "[m/cell] rasterisation of built-in mazes"),
     ParamSpec("frame_id", "map", "frame of the published grid"),
 ]

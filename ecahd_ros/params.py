@@ -21,6 +21,7 @@ from typing import TypeVar
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
 
+from ecahd_core.maps import DEFAULT_MAP
 from ecahd_core.errors import EcahdError
 
 T = TypeVar("T")
@@ -133,7 +134,7 @@ def robot_spec(robot: str, footprint: str) -> str:
 
 # The parameters several nodes declare, defined once (name -> spec).
 SHARED = {spec.name: spec for spec in [
-    ParamSpec("map_name", "maze2d-large", "name of the map on 'map' (checked against the "
+    ParamSpec("map_name", DEFAULT_MAP, "name of the map on 'map' (checked against the "
                                           "checkpoint with the grid's fingerprint)"),
     ParamSpec("robot", "circle", "footprint preset: circle, quadruped, humanoid"),
     ParamSpec("footprint", "", "Nav2 footprint polygon '[[x, y], ...]' [m]; overrides robot"),

@@ -5,10 +5,11 @@ navigation benchmark's control limits) does not import ``sim_bridge``: the simul
 (``SimBridgeParams``); its docstring gives each one's meaning and units."""
 from __future__ import annotations
 
+from ecahd_core.maps import DEFAULT_MAP
 from ecahd_ros.params import ParamSpec, shared
 
 PARAMETERS = [
-    ParamSpec("map", "maze2d-large", "built-in maze (maze2d-umaze, maze2d-medium, maze2d-large) or Nav2 "
+    ParamSpec("map", DEFAULT_MAP, "built-in maze (maze2d-umaze, maze2d-medium, maze2d-large) or Nav2 "
                             "map YAML path"),
     ParamSpec("resolution", 0.1, "[m/cell] rasterisation of built-in mazes"),
     ParamSpec("robot", "circle", "footprint preset: circle, quadruped, humanoid"),

@@ -59,7 +59,7 @@ import numpy as np
 
 from ecahd_core.errors import SimError
 from ecahd_core.footprint import Footprint, make_footprint
-from ecahd_core.maps import DEFAULT_RESOLUTION, GridMap, load_map
+from ecahd_core.maps import DEFAULT_MAP, DEFAULT_RESOLUTION, GridMap, load_map
 from ecahd_core.scenario import Obstacle
 
 logger = logging.getLogger(__name__)
@@ -107,7 +107,7 @@ class SimConfig:
         seed: seed of the simulator's random generator (scan noise).
     """
 
-    map: str = "maze2d-large"
+    map: str = DEFAULT_MAP
     resolution: float = DEFAULT_RESOLUTION
     robot: str = "circle"
     dt: float = 0.02
@@ -269,7 +269,7 @@ class MazeSim:
 
     Usage::
 
-        sim = MazeSim(SimConfig(map="maze2d-large", robot="quadruped", dt=0.02))
+        sim = MazeSim(SimConfig(map=DEFAULT_MAP, robot="quadruped", dt=0.02))
         state = sim.step(0.5, 0.0)   # SimState
         ranges = sim.scan(beams=360, range_max=8.0)   # (360,) [m]
         image = sim.render_topdown(256)

@@ -42,6 +42,7 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
+from ecahd_core.maps import DEFAULT_MAP
 from ecahd_core.errors import EcahdError
 from ecahd_core.problems import DEFAULT_SEED
 from ecahd_core.threads import INFERENCE_THREADS, set_torch_threads, training_threads
@@ -73,7 +74,7 @@ class ContentionBenchSettings:
         warmup: untimed calls of each workload per thread count, before its quiet cell.
     """
 
-    map: str = "maze2d-large"
+    map: str = DEFAULT_MAP
     robot: str = "circle"
     threads: int = INFERENCE_THREADS
     reference_threads: int | None = None

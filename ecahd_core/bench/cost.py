@@ -14,6 +14,7 @@ import os
 import platform
 from dataclasses import asdict, dataclass
 
+from ecahd_core.maps import DEFAULT_MAP
 from ecahd_core.bench.timing import median_ms
 from ecahd_core.errors import EcahdError
 
@@ -43,7 +44,7 @@ class CostBenchSettings:
     horizon: int = 4
     n_interp: int = 8
     footprint: str = "circle"
-    map_name: str = "maze2d-large"
+    map_name: str = DEFAULT_MAP
     mode: str = "surface"
     repeats: int = 200
     loop_repeats: int = 3

@@ -35,6 +35,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from ecahd_core.maps import DEFAULT_MAP
 from ecahd_core.errors import EcahdError
 from ecahd_core.placement import BACKTRACKS, LEG_BATCHES
 
@@ -72,7 +73,7 @@ PAPER_TABLE_II = {("line", False): (89.06, 0.4675), ("line", True): (87.50, 0.43
 
 @dataclass(frozen=True, kw_only=True)
 class PlanningBenchSettings:
-    map: str = "maze2d-large"
+    map: str = DEFAULT_MAP
     problems: int = 128
     seed: int = 2026
     sample_seed: int = 0
@@ -429,7 +430,7 @@ def format_markdown(r: PlanningBenchResult) -> str:
                 and c["replan"] == "every_waypoint" else "")
              + ", "
              f"torch {c['torch']} with {c['threads']} thread(s). Each cell: ours / paper"
-             + ("." if c["map"] == "maze2d-large" else
+             + ("." if c["map"] == DEFAULT_MAP else
                 " (the paper's figures are for maze2d-large, shown for scale only)."), "",
              f"| metric | robot | {head} |", "|---|---|" + "---|" * len(cols)]
 

@@ -21,6 +21,7 @@ import statistics
 import time
 from dataclasses import asdict, dataclass, field, replace
 
+from ecahd_core.maps import DEFAULT_MAP
 from ecahd_core.bench.timing import interleaved_median_ms, median_ms
 
 log = logging.getLogger(__name__)
@@ -36,7 +37,7 @@ PAPER = {
 
 @dataclass(frozen=True, kw_only=True)
 class SamplingBenchSettings:
-    map: str = "maze2d-large"
+    map: str = DEFAULT_MAP
     robot: str = "circle"
     repeats: int = 20
     threads: int | None = None  # None: torch's default

@@ -4,7 +4,7 @@ Each module defines ``add_arguments(parser)`` and ``run(args) -> int``; the disp
 ``ecahd_ros.cli`` imports a module only when its subcommand is used.
 """
 
-DEFAULT_MAP = "maze2d-large"
+from ecahd_core.maps import DEFAULT_MAP
 
 
 def add_map_arguments(p) -> None:

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+from ecahd_core.maps import DEFAULT_MAP
 from ecahd_core.bench import contention as bench_contention
 from ecahd_core.bench import monitor as bench_monitor
 from ecahd_core.bench import replan as bench_replan
@@ -86,7 +87,7 @@ def _run_cost(args: argparse.Namespace) -> int:
 
 # -------------------------------------------------------------------------------- sampling
 def _add_model_arguments(parser: argparse.ArgumentParser, kinds: tuple[str, ...]) -> None:
-    parser.add_argument("--map", default="maze2d-large", help="built-in maze or Nav2 map YAML")
+    parser.add_argument("--map", default=DEFAULT_MAP, help="built-in maze or Nav2 map YAML")
     for kind in kinds:
         parser.add_argument(f"--{kind}", metavar="CKPT", default=None,
                             help=f"{kind.upper()} checkpoint (default: the shipped model)")

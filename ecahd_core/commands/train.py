@@ -17,6 +17,7 @@ import math
 import time
 from pathlib import Path
 
+from ecahd_core.maps import DEFAULT_MAP
 from ecahd_core.errors import EcahdError
 from ecahd_core.threads import (add_precision_argument, add_threads_argument, resolve_precision,
                                 set_torch_threads, training_threads)
@@ -72,7 +73,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def add_all_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--map", default="maze2d-large", help="built-in maze or Nav2 map YAML")
+    p.add_argument("--map", default=DEFAULT_MAP, help="built-in maze or Nav2 map YAML")
     p.add_argument("--robot", default="circle",
                    help="footprint whose clearance the expert A* paths keep")
     p.add_argument("--pairs", type=int, default=5000, help="expert start/goal pairs")
