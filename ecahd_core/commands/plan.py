@@ -25,7 +25,8 @@ from dataclasses import dataclass, field
 from ecahd_core.bench.output import write_json
 from ecahd_core.commands import add_map_arguments
 from ecahd_core.errors import EcahdError
-from ecahd_core.threads import add_precision_argument, resolve_precision
+from ecahd_core.threads import (add_precision_argument, add_threads_argument,
+                                resolve_precision, set_torch_threads)
 from ecahd_core.viz import PlanFigure
 
 log = logging.getLogger("ecahd.plan")
@@ -80,6 +81,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="[m] SD/ECAHD: SD's waypoints in a wall move into free space within R "
                         "and legs crossing a wall get a placed midpoint (ours; 0: off; "
                         "default: on at 1 m for maps over 50 000 cells, off on smaller ones)")
+    add_threads_argument(p)
     add_precision_argument(p, "auto", "the SD Transformer's inference precision (auto: bf16 "
                                       "where the CPU has native bfloat16, as global_planner's "
                                       "inference_precision)")
@@ -122,6 +124,7 @@ def run(args: argparse.Namespace) -> int:
     from ecahd_core.maps import load_map
     from ecahd_core.viz import save_figures
 
+    set_torch_threads(args.threads)  # 1 by default: a busy CPU is not oversubscribed
     grid = load_map(args.map, args.resolution)
     grid.require_free_space()
     footprint = make_footprint(args.robot)
