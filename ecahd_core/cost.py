@@ -133,10 +133,6 @@ class CollisionCost:
         points = torch.as_tensor(footprint.points, dtype=torch.float32).contiguous()
         return cls(costmap=config.make_costmap(grid), footprint_points=points, config=config)
 
-    def as_tuple(self) -> tuple[CostMap, torch.Tensor, CostConfig]:
-        """(costmap, footprint_points, config): the ``cost=`` argument of the planners."""
-        return self.costmap, self.footprint_points, self.config
-
     def collision_cost(self, traj: torch.Tensor) -> torch.Tensor:
         """c^l of each trajectory: traj (B, P, 2) [m] -> (B,) J's collision cost."""
         terms = trajectory_cost(traj, traj[:, -1], self.footprint_points, self.costmap,

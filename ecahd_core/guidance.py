@@ -33,6 +33,12 @@ class CostJGuide:
         self.goal = torch.as_tensor(goal, dtype=costmap.dtype, device=costmap.device)
         self._kwargs = self.config.cost_kwargs()
 
+    @classmethod
+    def of(cls, cost, goal) -> "CostJGuide":
+        """J of a :class:`~ecahd_core.cost.CollisionCost` (cost map, footprint points, config)
+        towards ``goal`` ((2,) or (B, 2) [m])."""
+        return cls(cost.costmap, cost.footprint_points, goal, cost.config)
+
     def terms(self, traj: Tensor):
         """CostTerms (dist_cost (B,), collision_cost (B,)) without gradients."""
         with torch.no_grad():

@@ -12,7 +12,7 @@ import bisect
 import math
 import time
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -528,8 +528,8 @@ class ObstacleMemory:
         """The static map with the remembered cells occupied."""
         return fuse_grid(self.grid, self.mask(now, within), self.grid.origin)
 
-    def fused_cost(self, now: float, static_cost: tuple) -> tuple:
-        """J's (costmap, footprint points, config) with the remembered cells as obstacles:
+    def fused_cost(self, now: float, static_cost):
+        """J's CollisionCost with the remembered cells as obstacles:
         ``static_cost`` (built on :attr:`grid`) with them added on the tiles of
         ``MEMORY_TILE`` cells that hold them (``costmap.add_obstacles``; in free space the
         same cost as a cost map built from :meth:`fused`, 2-3x faster on a 2000 x 2000 map,
@@ -542,12 +542,12 @@ class ObstacleMemory:
             return static_cost
         key = (id(static_cost), mask.tobytes())
         if self._cost_cache is None or self._cost_cache[0] != key:
-            costmap, points, config = static_cost
             rows, cols = np.nonzero(mask)
             occupied = self.grid.occupied
-            costmap = add_obstacles(costmap, rows, cols, lambda r, c: occupied[r, c],
-                                    tile=MEMORY_TILE, name="remembered")
-            self._cost_cache = (key, (costmap, points, config))
+            costmap = add_obstacles(static_cost.costmap, rows, cols,
+                                    lambda r, c: occupied[r, c], tile=MEMORY_TILE,
+                                    name="remembered")
+            self._cost_cache = (key, replace(static_cost, costmap=costmap))
         return self._cost_cache[1]
 
     def detour(self, footprint, start, goal, now: float) -> tuple[np.ndarray, int]:

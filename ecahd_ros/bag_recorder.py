@@ -34,7 +34,6 @@ from __future__ import annotations
 import importlib
 import math
 import time
-from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
 
@@ -49,7 +48,7 @@ from rosbags.typesys import get_typestore
 
 from ecahd_core.bag_io import TYPESTORE, read_bag  # noqa: F401 (read_bag: re-exported here)
 from ecahd_core.errors import BagError
-from ecahd_ros.params import ParamSpec, declare_parameters
+from ecahd_ros.params import (ParamSpec, declare_parameters, parameters_dataclass)
 from ecahd_ros.spin import spin_node
 
 BAG_VERSION = 9  # rosbag2 metadata version of Jazzy (offered_qos_profiles as a list)
@@ -67,17 +66,9 @@ PARAMETERS = [
 ]
 
 
-
-
-@dataclass(frozen=True, kw_only=True)
+@parameters_dataclass(PARAMETERS)
 class BagRecorderParams:
     """The node's validated parameters."""
-
-    output: str
-    topics: tuple[str, ...]
-    latched_topics: tuple[str, ...]
-    storage: str
-    discovery_period: float
 
     def __post_init__(self) -> None:
         if self.storage not in STORAGES:

@@ -11,12 +11,12 @@ import importlib
 import json
 from pathlib import Path
 
-# node name -> module holding its PARAMETERS list (sim_bridge's are declared on the ROS side, so
-# rendering them does not import the simulator)
+# node name -> module holding its PARAMETERS list (declared apart from the nodes' wiring, so
+# rendering them imports neither the simulator nor the models)
 NODES = {
     "sim_bridge": "ecahd_ros.sim_bridge_params",
-    "global_planner": "ecahd_ros.global_planner",
-    "local_refiner": "ecahd_ros.local_refiner",
+    "global_planner": "ecahd_ros.global_planner_params",
+    "local_refiner": "ecahd_ros.local_refiner_params",
     "bag_recorder": "ecahd_ros.bag_recorder",
     "map_publisher": "ecahd_ros.map_publisher",
 }

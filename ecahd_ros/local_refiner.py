@@ -62,7 +62,6 @@ from __future__ import annotations
 
 import threading
 import time
-from dataclasses import dataclass
 from functools import partial
 
 from geometry_msgs.msg import Twist, TwistStamped
@@ -74,234 +73,22 @@ from rclpy.node import Node
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
-from ecahd_core.collision_monitor import SLOWDOWN_PROFILES, CollisionMonitorConfig
 from ecahd_core.errors import EcahdError
-from ecahd_core.planning.local import LocalRunner, LocalRunnerConfig, SegmentResult, judge_items
+from ecahd_core.planning.local import LocalRunner, SegmentResult, judge_items
 from ecahd_core.planning.dense import DenseConfig, DenseStage
 from ecahd_core.sensing import PoseHistory
 from ecahd_core.worker import LatestWorker
 from ecahd_ros.callbacks import check_frame, guard, now_seconds
 from ecahd_ros.conversions import (footprint_markers, layout_to_msg, msg_to_grid, path_to_xy,
                                    timing_message, xy_to_path, yaw_from_quaternion)
-from ecahd_ros.params import (ParamSpec, collision_cost, declare_parameters, make_robot,
-                              on_parameter_change, read_parameters, require,
-                              require_cost_margin, require_non_negative, require_positive,
-                              shared)
+from ecahd_ros.local_refiner_params import DYNAMIC, PARAMETERS, LocalRefinerParams
+from ecahd_ros.params import (collision_cost, declare_parameters, make_robot, on_parameter_change,
+                              read_parameters)
 from ecahd_ros.qos import MAP_QOS, PLAN_QOS, SCAN_QOS, STREAM_QOS, VIZ_QOS
 from ecahd_ros.spin import spin_node
 
-# the monitor's defaults live in CollisionMonitorConfig (one home for each)
-_MONITOR = CollisionMonitorConfig()
-
-PARAMETERS = [
-    ParamSpec("dd_model", "", "DD checkpoint path; '' = the shipped model for map_name"),
-    *shared("map_name", "robot", "footprint", "footprint_padding", "global_frame",
-            "clearance_margin", "cost_margin"),
-    ParamSpec("c_th", DenseConfig().c_th, "DD refines a local plan whose collision cost c^l "
-                                          "exceeds this"),
-    ParamSpec("dd_enabled", True, "run Dense Diffusion at all; false: follow the straight local "
-                                  "plans (ECAHD w/o DD; J still checked for the diagnostics)"),
-    ParamSpec("polish_steps", DenseConfig().polish_steps,
-              "J-descent steps on a DD local plan still above c_th (ours); 0 = the paper"),
-    ParamSpec("exact_check", True, "never follow a local plan the exact checker finds in "
-                                   "collision (ours); false: the paper's ablations (ECAHD w/o "
-                                   "DD, FD without a local planner) drive straight segments "
-                                   "into walls"),
-    ParamSpec("control_rate", 20.0, "[Hz] cmd_vel rate (Nav2's controller_frequency default)"),
-    ParamSpec("control_clock", "steady", "clock of the control timer: 'steady' (monotonic wall "
-                                         "time, as Nav2's controller_server loop: ticks stay "
-                                         "evenly spaced however /clock arrives) or 'ros' (the "
-                                         "node's clock, /clock with use_sim_time: for a "
-                                         "simulation running faster or slower than real "
-                                         "time). Either way the controller reads the node's "
-                                         "clock"),
-    ParamSpec("prepare_ahead", 2, "segments refined ahead of the one being followed"),
-    ParamSpec("worker_nice", 0, "nice increment of the worker threads (local stage, scan "
-                                "fusion, map), so that their work yields the CPU to the control "
-                                "timer; 0 = the process's priority (5 changed no closed-loop "
-                                "figure, docs/RESULTS.md)"),
-    ParamSpec("max_v", 0.5, "[m/s] limit on |linear velocity| (dynamic)"),
-    ParamSpec("max_w", 1.5, "[rad/s] limit on |angular velocity| (dynamic)"),
-    ParamSpec("max_accel", 1.0, "[m/s^2] limit on |linear acceleration| (dynamic)"),
-    ParamSpec("lookahead", 0.25, "[m] pure-pursuit lookahead distance (0.4 cut corners: 3.7% "
-                                 "of sim steps in wall contact over 5 demo episodes, 0.25: 0%; "
-                                 "dynamic)"),
-    ParamSpec("waypoint_tolerance", 0.3, "[m] reaching a waypoint this close starts the next "
-                                         "segment (dynamic)"),
-    ParamSpec("goal_tolerance", 0.25, "[m] the goal (last plan point) counts as reached "
-                                      "(dynamic)"),
-    ParamSpec("stale_timeout", 1.0, "[s] odometry older than this stops the robot (dynamic)"),
-    ParamSpec("plan_timeout", 0.0, "[s] a plan older than this stops the robot; 0 = never "
-                                   "(dynamic)"),
-    ParamSpec("enable_stamped_cmd_vel", False, "publish geometry_msgs/TwistStamped on cmd_vel"),
-    ParamSpec("use_scan", True, "fuse 'scan' into a rolling local costmap that J and the exact "
-                                "check read (obstacles not on the map)"),
-    ParamSpec("scan_in_plans", True, "the local costmap feeds J and the exact check (false: "
-                                     "scans reach only the collision monitor)"),
-    ParamSpec("local_costmap_size", 6.0, "[m] side of the rolling local costmap window"),
-    ParamSpec("obstacle_persistence", 2.0, "[s] a scanned obstacle not seen again for this long "
-                                           "is forgotten; 0 = until a ray clears it"),
-    ParamSpec("local_costmap_rate", 2.0, "[Hz] publishing rate of 'local_costmap'"),
-    ParamSpec("mark_moving_obstacles", False, "returns on obstacles the tracker sees moving "
-                                              "mark the local costmap too (false: they only "
-                                              "clear, and the collision monitor judges them "
-                                              "by their predicted motion, so a person crossing "
-                                              "a corridor does not block the plan through it)"),
-    *shared("scan_offset_x", "scan_offset_y", "scan_offset_yaw"),
-    ParamSpec("collision_monitor", True, "stop / slow down any cmd_vel whose footprint, swept "
-                                         "over monitor_time_to_collision, hits a scan point "
-                                         "that is not on the static map"),
-    ParamSpec("monitor_time_to_collision", _MONITOR.time_to_collision, "[s] horizon of the collision monitor"),
-    ParamSpec("monitor_stop_margin", _MONITOR.stop_margin, "[m] footprint growth that stops the robot"),
-    ParamSpec("monitor_slowdown_margin", _MONITOR.slowdown_margin, "[m] footprint growth that slows the robot down"),
-    ParamSpec("monitor_slowdown_ratio", _MONITOR.slowdown_ratio, "slowing down caps |v| and |w| at this times "
-                                             "max_v and max_w (at the stop margin with the "
-                                             "linear profile)"),
-    ParamSpec("monitor_slowdown_profile", _MONITOR.slowdown_profile, "'linear': the slowdown's ratio rises "
-                                                    "from monitor_slowdown_ratio at the stop "
-                                                    "margin to 1 at the slowdown margin with "
-                                                    "the obstacle's least clearance; 'step': "
-                                                    "monitor_slowdown_ratio whenever within "
-                                                    "the margin (Nav2)"),
-    ParamSpec("monitor_source_timeout", _MONITOR.source_timeout, "[s] scans older than this (after the first) stop "
-                                             "the robot"),
-    ParamSpec("monitor_yield", True, "when the monitor stops the robot where a moving obstacle "
-                                     "(tracked from the scans) would hit it, drive the escape "
-                                     "command that stays clear longest (static map checked)"),
-    ParamSpec("monitor_yield_horizon", _MONITOR.yield_horizon, "[s] how far ahead moving obstacles are predicted "
-                                            "for yielding"),
-    ParamSpec("monitor_prediction_growth", _MONITOR.prediction_growth, "[m/s] a moving obstacle predicted t s ahead "
-                                                "counts as this times min(t, "
-                                                "monitor_time_to_collision) closer (its "
-                                                "velocity is an estimate); 0 trusts it"),
-    ParamSpec("monitor_shuttles", True, "movers seen going back and forth are predicted "
-                                        "turning round at the ends of their stretch (false: "
-                                        "straight on; moving-contact episodes 2 of 20 with, "
-                                        "6-10 without, docs/RESULTS.md)"),
-    ParamSpec("monitor_beat_horizon", 0.0, "[s] with monitor_shuttles: a command that meets a "
-                                           "mover going back and forth within this horizon "
-                                           "is stopped (the robot does not start across its "
-                                           "beat); 0 = off (3 s: the robot waited for "
-                                           "crossers, 10 of 20 reached against 14)"),
-    *shared("seed", "torch_threads"),
-]
-CONTROL_CLOCKS = ("steady", "ros")
 POSE_HISTORY = 1.0  # [s] of odometry poses kept to place scans by their stamps
 SCAN_POSE_WAIT = 0.2  # [s] a scan waits at most this long for the odometry of its stamp
-DYNAMIC = ("max_v", "max_w", "max_accel", "lookahead", "waypoint_tolerance", "goal_tolerance",
-           "stale_timeout", "plan_timeout")
-
-
-@dataclass(frozen=True, kw_only=True)
-class LocalRefinerParams:
-    """The node's validated parameters (see :data:`PARAMETERS` for units)."""
-
-    dd_model: str
-    map_name: str
-    robot: str
-    footprint: str
-    footprint_padding: float
-    global_frame: str
-    clearance_margin: float
-    cost_margin: float
-    c_th: float
-    dd_enabled: bool
-    polish_steps: int
-    exact_check: bool
-    control_rate: float
-    control_clock: str
-    prepare_ahead: int
-    worker_nice: int
-    max_v: float
-    max_w: float
-    max_accel: float
-    lookahead: float
-    waypoint_tolerance: float
-    goal_tolerance: float
-    stale_timeout: float
-    plan_timeout: float
-    enable_stamped_cmd_vel: bool
-    use_scan: bool
-    scan_in_plans: bool
-    local_costmap_size: float
-    obstacle_persistence: float
-    local_costmap_rate: float
-    mark_moving_obstacles: bool
-    scan_offset_x: float
-    scan_offset_y: float
-    scan_offset_yaw: float
-    collision_monitor: bool
-    monitor_time_to_collision: float
-    monitor_stop_margin: float
-    monitor_slowdown_margin: float
-    monitor_slowdown_ratio: float
-    monitor_slowdown_profile: str
-    monitor_source_timeout: float
-    monitor_yield: bool
-    monitor_yield_horizon: float
-    monitor_prediction_growth: float
-    monitor_shuttles: bool
-    monitor_beat_horizon: float
-    seed: int
-    torch_threads: int
-
-    def __post_init__(self) -> None:
-        require_positive(self, "control_rate", "max_v", "max_w", "max_accel", "lookahead",
-                         "waypoint_tolerance", "goal_tolerance", "stale_timeout",
-                         "torch_threads")
-        require_cost_margin(self)
-        require_non_negative(self, "c_th", "footprint_padding", "plan_timeout", "seed",
-                             "clearance_margin",
-                             "polish_steps", "prepare_ahead", "obstacle_persistence",
-                             "monitor_prediction_growth", "monitor_beat_horizon")
-        require_positive(self, "local_costmap_size", "local_costmap_rate",
-                         "monitor_time_to_collision", "monitor_source_timeout",
-                         "monitor_yield_horizon")
-        require(self.control_clock in CONTROL_CLOCKS, "control_clock", self.control_clock,
-                f"one of {list(CONTROL_CLOCKS)}")
-        require(0 <= self.worker_nice <= 19, "worker_nice", self.worker_nice, "in 0..19")
-        require(0 < self.monitor_slowdown_ratio <= 1, "monitor_slowdown_ratio",
-                self.monitor_slowdown_ratio, "in (0, 1]")
-        require(self.monitor_slowdown_profile in SLOWDOWN_PROFILES, "monitor_slowdown_profile",
-                self.monitor_slowdown_profile, f"one of {list(SLOWDOWN_PROFILES)}")
-        require(0 <= self.monitor_stop_margin <= self.monitor_slowdown_margin,
-                "monitor_stop_margin", self.monitor_stop_margin,
-                ">= 0 and <= monitor_slowdown_margin")
-        require(bool(self.global_frame), "global_frame", self.global_frame, "non-empty")
-
-    def runner_config(self) -> LocalRunnerConfig:
-        return LocalRunnerConfig(
-            control_period=1.0 / self.control_rate, max_v=self.max_v, max_w=self.max_w,
-            max_accel=self.max_accel, lookahead=self.lookahead,
-            waypoint_tolerance=self.waypoint_tolerance, goal_tolerance=self.goal_tolerance,
-            stale_timeout=self.stale_timeout, plan_timeout=self.plan_timeout,
-            prepare_ahead=self.prepare_ahead)
-
-    def local_costmap_config(self):
-        from ecahd_core.local_costmap import LocalCostmapConfig
-
-        return LocalCostmapConfig(size=self.local_costmap_size,
-                                  persistence=self.obstacle_persistence)
-
-    def monitor_config(self):
-        from ecahd_core.collision_monitor import CollisionMonitorConfig
-
-        return CollisionMonitorConfig(
-            time_to_collision=self.monitor_time_to_collision,
-            stop_margin=self.monitor_stop_margin, slowdown_margin=self.monitor_slowdown_margin,
-            slowdown_ratio=self.monitor_slowdown_ratio,
-            slowdown_profile=self.monitor_slowdown_profile,
-            source_timeout=self.monitor_source_timeout,
-            # the controller ramps from the command sent: cap, do not scale again each tick
-            slowdown_limits=(self.max_v, self.max_w),
-            escape_limits=(self.max_v, self.max_w) if self.monitor_yield else None,
-            yield_horizon=self.monitor_yield_horizon,
-            prediction_growth=self.monitor_prediction_growth,
-            beat_horizon=self.monitor_beat_horizon)
-
-    @property
-    def scan_offset(self) -> tuple[float, float, float]:
-        return self.scan_offset_x, self.scan_offset_y, self.scan_offset_yaw
 
 
 class LocalRefiner(Node):

@@ -37,6 +37,21 @@ class ParamSpec:
     description: str
 
 
+def parameters_dataclass(specs: Sequence[ParamSpec]):
+    """Class decorator: ``cls`` as a frozen, keyword-only dataclass with one field per spec of
+    ``specs``, in their order, each typed as its default. The fields are declared nowhere else
+    (one home: the ParamSpec list); the class adds ``__post_init__`` validation and the
+    methods that hand the core its configs."""
+    def wrap(cls):
+        own = cls.__dict__.get("__annotations__", {})
+        if own:
+            raise EcahdError(f"{cls.__name__}: its fields come from its ParamSpec list; remove "
+                             f"the annotations {sorted(own)}")
+        cls.__annotations__ = {spec.name: type(spec.default).__name__ for spec in specs}
+        return dataclass(frozen=True, kw_only=True)(cls)
+    return wrap
+
+
 def declare_parameters(node: Node, specs: Sequence[ParamSpec],
                        dynamic: Sequence[str] = ()) -> None:
     """Declare every parameter once with its description; read-only unless named in

@@ -67,7 +67,6 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
 
 import numpy as np
 import rclpy
@@ -85,8 +84,8 @@ from ecahd_core.errors import EcahdError
 from ecahd_core.scenario import Obstacle, read_scenario
 from ecahd_ros.conversions import grid_to_msg, pose_from_xy_yaw, yaw_from_quaternion
 from ecahd_ros.qos import MAP_QOS, STREAM_QOS, VIZ_QOS
-from ecahd_ros.params import (declare_parameters, read_parameters, require, require_non_negative,
-                              require_positive)
+from ecahd_ros.params import (declare_parameters, parameters_dataclass, read_parameters, require,
+                              require_non_negative, require_positive)
 from ecahd_ros.sim_bridge_params import DYNAMIC, PARAMETERS  # every parameter, declared once
 from ecahd_ros.spin import spin_node
 from sim_bridge.sim import WALL_HEIGHT, MazeSim, SimConfig, SimError, SimState, scan_angles
@@ -96,37 +95,9 @@ MAP_FRAME = "map"
 BASE_FRAME = "base_link"
 
 
-@dataclass(frozen=True, kw_only=True)
+@parameters_dataclass(PARAMETERS)
 class SimBridgeParams:
     """The node's validated parameters (see the module docstring for units)."""
-
-    map: str
-    resolution: float
-    robot: str
-    footprint: str
-    start_x: float
-    start_y: float
-    start_yaw: float
-    rate_hz: float
-    control_timeout: float
-    max_v: float
-    max_w: float
-    realtime_factor: float
-    publish_camera: bool
-    camera_rate_hz: float
-    enable_stamped_cmd_vel: bool
-    publish_scan: bool
-    scan_rate_hz: float
-    scan_beams: int
-    scan_range_min: float
-    scan_range_max: float
-    scan_noise_std: float
-    scan_offset_x: float
-    scan_offset_y: float
-    scan_offset_yaw: float
-    scan_frame_id: str
-    seed: int
-    obstacles_file: str
 
     def __post_init__(self) -> None:
         for name in ("resolution", "rate_hz", "control_timeout", "max_v", "max_w",

@@ -650,7 +650,7 @@ def test_remembered_obstacles_in_j_equal_a_whole_new_cost_map_in_free_space(smal
     from ecahd_core.sensing import ObstacleMemory
 
     grid, robot = small_office.grid, make_footprint("circle")
-    static = CollisionCost.build(grid, robot).as_tuple()
+    static = CollisionCost.build(grid, robot)
     memory = ObstacleMemory(grid)
     assert memory.fused_cost(0.0, static) is static  # nothing remembered
     from ecahd_core.bench.replan import _remember_boxes
@@ -660,16 +660,16 @@ def test_remembered_obstacles_in_j_equal_a_whole_new_cost_map_in_free_space(smal
     fused = memory.fused(0.0)
     whole = CollisionCost.build(fused, robot).costmap.grid
     rows, cols = np.nonzero(fused.occupied & ~grid.occupied)
-    got = add_obstacles(static[0], rows, cols, lambda r, c: grid.occupied[r, c], tile=tile).grid
+    got = add_obstacles(static.costmap, rows, cols, lambda r, c: grid.occupied[r, c], tile=tile).grid
     free = torch.as_tensor(~fused.occupied)
     # equal up to float32 rounding: cv2's distance transform of a window can round a distance
     # one ulp apart from the whole map's (the 0.5 m building margin shows it, 168 cells of 49 227)
     torch.testing.assert_close(got[free], whole[free], rtol=0, atol=1e-6)
-    assert bool((got >= static[0].grid).all())  # never below the static cost
+    assert bool((got >= static.costmap.grid).all())  # never below the static cost
     cached = memory.fused_cost(0.0, static)
     assert memory.fused_cost(0.0, static) is cached  # kept until the marks change
-    torch.testing.assert_close(cached[0].grid[free], whole[free], rtol=0, atol=1e-6)
-    assert cached[1] is static[1] and cached[2] is static[2]
+    torch.testing.assert_close(cached.costmap.grid[free], whole[free], rtol=0, atol=1e-6)
+    assert cached.footprint_points is static.footprint_points and cached.config is static.config
 
 
 def test_memory_detour_tries_what_was_seen_lately_when_the_whole_memory_closes_every_way():

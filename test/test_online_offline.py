@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from ecahd_core.cost import CostConfig
+from ecahd_core.cost import CollisionCost, CostConfig
 from ecahd_core.footprint import make_footprint
 from ecahd_core.maps import builtin_map
 from ecahd_core.model_zoo import load_model
@@ -56,7 +56,9 @@ def test_the_online_planner_makes_the_offline_planners_global_plans(monkeypatch,
     grid, fp = builtin_map("maze2d-large"), make_footprint(robot)
     cost_config = CostConfig.for_map(grid)
     costmap = cost_config.make_costmap(grid)
-    cost = (costmap, torch.as_tensor(fp.points, dtype=costmap.dtype), cost_config)
+    cost = CollisionCost(costmap=costmap, footprint_points=torch.as_tensor(fp.points,
+                                                                         dtype=costmap.dtype),
+                         config=cost_config)
     sd_ckpt, dd_ckpt = load_model("sd", grid, footprint=fp), load_model("dd", grid, footprint=fp)
     config = SparseConfig(num_candidates=10, selection="collision_aware")
     offline = HierarchicalPlanner(

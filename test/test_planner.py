@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from ecahd_core.cost import CostConfig
+from ecahd_core.cost import CollisionCost, CostConfig
 from ecahd_core.errors import EcahdError
 from ecahd_core.footprint import make_footprint
 from ecahd_core.maps import builtin_map
@@ -258,7 +258,9 @@ def test_safety_net_with_the_planner_leaves_a_collision_free_plan_as_it_is():
 def _cost_triple(robot="circle"):
     fp = make_footprint(robot)
     cc = CostConfig()
-    return fp, (cc.make_costmap(GRID), torch.as_tensor(fp.points, dtype=torch.float64), cc)
+    return fp, CollisionCost(costmap=cc.make_costmap(GRID),
+                             footprint_points=torch.as_tensor(fp.points, dtype=torch.float64),
+                             config=cc)
 
 
 def test_max_spacing_densifies_long_legs_and_keeps_the_ends():
@@ -289,8 +291,8 @@ def test_algorithm1_with_max_spacing_reaches_the_goal_through_every_waypoint(rep
     sd = SparseDiffusion(load_model("sd", GRID, footprint=fp),
                          SparseConfig(num_candidates=4, selection="collision_aware",
                                       max_spacing=0.6), cost=cost)
-    hd = HierarchicalPlanner(sd, load_model("dd", GRID, footprint=fp), costmap=cost[0],
-                             footprint_points=fp.points, cost_config=cost[2], replan=replan)
+    hd = HierarchicalPlanner(sd, load_model("dd", GRID, footprint=fp), costmap=cost.costmap,
+                             footprint_points=fp.points, cost_config=cost.config, replan=replan)
     start, goal = np.array([1.5, 1.5]), np.array([10.5, 7.5])
     plan = hd.plan(start, goal, generator=torch.Generator().manual_seed(0))
     assert len(plan.segments) > 9  # more iterations than P^g - 1

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from ecahd_core.cost import CostConfig
+from ecahd_core.cost import CollisionCost, CostConfig
 from ecahd_core.diffusion.normalizer import Normalizer
 from ecahd_core.diffusion.sampler import DiffusionSampler, SamplerConfig, sample
 from ecahd_core.diffusion.scheduler import DDIMScheduler
@@ -157,7 +157,8 @@ S, G = np.array([1.5, 1.5]), np.array([10.5, 7.5])
 def shipped():
     fp = make_footprint("circle")
     cc = CostConfig()
-    cost = (cc.make_costmap(GRID), torch.as_tensor(fp.points, dtype=torch.float32), cc)
+    cost = CollisionCost(costmap=cc.make_costmap(GRID),
+                         footprint_points=torch.as_tensor(fp.points, dtype=torch.float32), config=cc)
     return fp, cc, cost, load_model("sd", GRID, footprint=fp)
 
 
@@ -208,7 +209,7 @@ def test_shipped_sd_replan_without_warm_start_is_plan_from_noise(shipped):
 def test_algorithm1_with_warm_starts_shrinks_the_horizon_and_joins_start_to_goal(shipped):
     fp, cc, cost, ckpt = shipped
     sd = SparseDiffusion(ckpt, SparseConfig(num_candidates=4, warm_fraction=0.3))
-    hd = HierarchicalPlanner(sd, load_model("dd", GRID, footprint=fp), costmap=cost[0],
+    hd = HierarchicalPlanner(sd, load_model("dd", GRID, footprint=fp), costmap=cost.costmap,
                              footprint_points=fp.points, cost_config=cc,
                              dense=DenseConfig(polish_steps=0))
     plan = hd.plan(S, G, generator=torch.Generator().manual_seed(0))

@@ -234,8 +234,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
 
     def run_cell(method, guidance, robot, cost_config=None, variant=""):
         fp = make_footprint(robot)
-        cost = CollisionCost.build(grid, fp, cost_config or CostConfig(margin=margin)
-                                   ).as_tuple()
+        cost = CollisionCost.build(grid, fp, cost_config or CostConfig(margin=margin))
         gen = torch.Generator().manual_seed(settings.sample_seed)
         net = None
         if method == "astar":

@@ -195,7 +195,7 @@ def run_replan_benchmark(settings: ReplanBenchSettings = ReplanBenchSettings(), 
     s = settings
     grid = load_bench_map(s.map)
     footprint = make_footprint(s.robot)
-    static = CollisionCost.build(grid, footprint).as_tuple()
+    static = CollisionCost.build(grid, footprint)
     astar = planner_for(grid, clearance_for_footprint(footprint))
     grid.free_distance  # noqa: B018  once per map, as the nodes' static map has it
     rng = np.random.default_rng(s.seed)
@@ -231,7 +231,7 @@ def run_replan_benchmark(settings: ReplanBenchSettings = ReplanBenchSettings(), 
         cost_ms, cost = _median_ms(new_cost, s.repeats)
         cost_ref_ms, ref = _median_ms(lambda: CollisionCost.build(fused, footprint), 1)
         free = torch.as_tensor(~fused.occupied)
-        diff = float((cost[0].grid - ref.costmap.grid).abs()[free].max())
+        diff = float((cost.costmap.grid - ref.costmap.grid).abs()[free].max())
         # crossing check on the route's legs
         crosses_ms, crosses = _median_ms(lambda: memory.crosses(route, footprint, now),
                                          s.repeats)

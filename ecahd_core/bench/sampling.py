@@ -21,8 +21,8 @@ import statistics
 import time
 from dataclasses import asdict, dataclass, field, replace
 
-from ecahd_core.maps import DEFAULT_MAP
 from ecahd_core.bench.timing import interleaved_median_ms, median_ms
+from ecahd_core.maps import DEFAULT_MAP
 
 log = logging.getLogger(__name__)
 
@@ -69,7 +69,7 @@ def run_sampling_benchmark(settings: SamplingBenchSettings, *, models: dict | No
     """``models``: optional {kind: checkpoint path}; default the shipped models of the map."""
     import torch
 
-    from ecahd_core.cost import CostConfig, trajectory_cost
+    from ecahd_core.cost import CollisionCost, CostConfig, trajectory_cost
     from ecahd_core.diffusion import (DiffusionSampler, SamplerConfig, apply_conditioning,
                                       native_bf16)
     from ecahd_core.footprint import make_footprint
@@ -110,7 +110,8 @@ def run_sampling_benchmark(settings: SamplingBenchSettings, *, models: dict | No
     # Algorithm 1's first re-plan with the planner's selection: from noise vs warm-started
     from ecahd_core.planning.sparse import SparseConfig, SparseDiffusion
 
-    cost = (costmap, torch.as_tensor(footprint.points, dtype=torch.float32), cost_config)
+    cost = CollisionCost(costmap=costmap, footprint_points=torch.as_tensor(
+        footprint.points, dtype=torch.float32), config=cost_config)
     planners = {"noise": SparseDiffusion(ckpt["sd"], SparseConfig(selection="collision_aware"),
                                          cost=cost)}
     for f in settings.warm_fractions:

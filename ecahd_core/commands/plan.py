@@ -251,7 +251,7 @@ def _plan_diffusion(args, grid, footprint, start, goal):
     polish = {} if args.polish_steps is None else {"polish_steps": args.polish_steps}
     polish["keep_better"] = not args.no_keep_better
     guided = _guided(args)
-    cost = CollisionCost.build(grid, footprint).as_tuple()
+    cost = CollisionCost.build(grid, footprint)
 
     def gen():
         return torch.Generator().manual_seed(args.seed)

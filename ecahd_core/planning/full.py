@@ -15,7 +15,7 @@ class FullDiffusion:
     Args:
         checkpoint: a loaded FD checkpoint.
         guidance: guide by J (goal distance + swept-footprint collision) at every step.
-        cost: (costmap, footprint_points, CostConfig), needed with guidance.
+        cost: J's CollisionCost, needed with guidance.
         guidance_weight, num_steps, eta: as for SD.
     """
 
@@ -26,7 +26,7 @@ class FullDiffusion:
         from ecahd_core.model_zoo import sample_steps
 
         if guidance and cost is None:
-            raise EcahdError("FD guidance needs the cost J (costmap, footprint points, CostConfig)")
+            raise EcahdError("FD guidance needs the cost J (a CollisionCost)")
         self.horizon = max(checkpoint.horizons)
         self.guidance, self.cost = guidance, cost
         self.sampler = DiffusionSampler.from_checkpoint(checkpoint, device=device, config=SamplerConfig(
@@ -41,8 +41,7 @@ class FullDiffusion:
         if self.guidance:
             from ecahd_core.guidance import CostJGuide
 
-            costmap, fp, cost_config = self.cost
-            guide = CostJGuide(costmap, fp, goal_t, cost_config)
+            guide = CostJGuide.of(self.cost, goal_t)
         out = self.sampler.sample(batch=1, horizon=self.horizon,
                                   conditions={0: start_t, -1: goal_t}, generator=generator,
                                   guide=guide)

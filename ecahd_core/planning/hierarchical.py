@@ -158,9 +158,9 @@ class HierarchicalPlanner(DenseStage):
         from ecahd_core.model_zoo import load_model
         from ecahd_core.planning.horizon import replan_spacing_for
 
-        costmap, points, cost_config = sd.cost
         return cls(sd, load_model("dd", grid, path=model, footprint=footprint),
-                   costmap=costmap, footprint_points=points, cost_config=cost_config,
+                   costmap=sd.cost.costmap, footprint_points=sd.cost.footprint_points,
+                   cost_config=sd.cost.config,
                    dense=dense, device=device, replan=replan,
                    replan_spacing=replan_spacing_for(grid, replan_spacing, sd.expert_spacing),
                    exact_check=exact_check_for(grid, footprint) if exact else None,

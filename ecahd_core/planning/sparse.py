@@ -187,7 +187,7 @@ class SparseDiffusion:
     Args:
         checkpoint: a loaded SD checkpoint (``model_zoo.load_model("sd", ...)``).
         config: SparseConfig.
-        cost: (costmap, footprint_points, CostConfig) for the collision_aware rule and for
+        cost: J's :class:`~ecahd_core.cost.CollisionCost` for the collision_aware rule and for
             guidance (optional otherwise).
         device: where the model runs.
         placer: a :class:`~ecahd_core.placement.WaypointPlacer` (ours, beyond the paper):
@@ -211,7 +211,7 @@ class SparseDiffusion:
                 guidance_space=self.config.guidance_space, precision=self.config.precision))
         if cost is None and (self.config.guidance or self.config.selection == "collision_aware"):
             raise EcahdError("SD guidance and the collision_aware rule need the cost J "
-                             "(costmap, footprint points, CostConfig)")
+                             "(a CollisionCost)")
         self.cost = cost
         self.placer = placer
         # [m] the median spacing of the expert waypoints the model learnt (None: not recorded,
@@ -257,8 +257,7 @@ class SparseDiffusion:
             if cfg.guidance:
                 from ecahd_core.guidance import CostJGuide
 
-                costmap, fp, cost_config = self.cost
-                guide = CostJGuide(costmap, fp, goal_t, cost_config)
+                guide = CostJGuide.of(self.cost, goal_t)
             cands = self.sampler.sample(batch=cfg.num_candidates, horizon=horizon,
                                         conditions={0: start_t, -1: goal_t},
                                         generator=generator, guide=guide,
@@ -296,7 +295,7 @@ class SparseDiffusion:
                 device: str = "cpu") -> "SparseDiffusion":
         """SD on ``grid`` for ``footprint`` as the commands and benchmarks build it: the map's
         model (``model``: a checkpoint path; None: the shipped one or one on $ECAHD_MODELS),
-        J's ``cost`` triple (None: built with the map's margin) and the placer of
+        J's ``cost`` (a CollisionCost; None: built with the map's margin) and the placer of
         ``place_reach`` [m] (None: by the map, ``placement.placer_for``; 0: off)."""
         from ecahd_core.cost import CollisionCost
         from ecahd_core.model_zoo import load_model
@@ -304,14 +303,14 @@ class SparseDiffusion:
 
         config = config or SparseConfig()
         if cost is None:
-            cost = CollisionCost.build(grid, footprint).as_tuple()
+            cost = CollisionCost.build(grid, footprint)
         ckpt = load_model("sd", grid, path=model, footprint=footprint, horizon=config.horizon)
         return cls(ckpt, config, cost=cost, device=device,
                    placer=placer_for(grid, footprint, place_reach))
 
     def on(self, *, cost=None, placer=None) -> "SparseDiffusion":
         """A view of this SD (the same model, sampler and settings) that weighs candidates by
-        ``cost`` (J's (costmap, footprint points, CostConfig)) and places waypoints with
+        ``cost`` (J's CollisionCost) and places waypoints with
         ``placer``, where given: e.g. the static map fused with the obstacles the scans found.
         The view is cheap (a shallow copy) and leaves this SD as it is."""
         view = copy.copy(self)
@@ -390,10 +389,11 @@ class SparseDiffusion:
             return None
         from ecahd_core.cost import trajectory_cost
 
-        costmap, fp, cost_config = self.cost
+        cost = self.cost
         with torch.no_grad():
-            col = trajectory_cost(cands.to(costmap.dtype), goals.to(costmap.dtype), fp, costmap,
-                                  **cost_config.cost_kwargs()).collision_cost
+            col = trajectory_cost(cands.to(cost.costmap.dtype), goals.to(cost.costmap.dtype),
+                                  cost.footprint_points, cost.costmap,
+                                  **cost.config.cost_kwargs()).collision_cost
         return col.cpu().numpy()
 
     def _candidates(self, starts: torch.Tensor, goals: torch.Tensor, horizon: int,
