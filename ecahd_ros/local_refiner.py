@@ -79,6 +79,7 @@ from ecahd_core.planning.dense import DenseConfig, DenseStage
 from ecahd_core.sensing import PoseHistory
 from ecahd_core.worker import LatestWorker
 from ecahd_ros.callbacks import check_frame, guard, now_seconds
+from ecahd_ros.clock_check import StampCheck
 from ecahd_ros.conversions import (footprint_markers, layout_to_msg, msg_to_grid, path_to_xy,
                                    timing_message, xy_to_path, yaw_from_quaternion)
 from ecahd_ros.local_refiner_params import DYNAMIC, PARAMETERS, LocalRefinerParams
@@ -89,6 +90,7 @@ from ecahd_ros.spin import spin_node
 
 POSE_HISTORY = 1.0  # [s] of odometry poses kept to place scans by their stamps
 SCAN_POSE_WAIT = 0.2  # [s] a scan waits at most this long for the odometry of its stamp
+SCAN_TOLERANCE = 1.0  # [s] a scan older than this is said to be stale (monitor off)
 
 
 class LocalRefiner(Node):
@@ -122,6 +124,8 @@ class LocalRefiner(Node):
                                          on_error=report, nice=p.worker_nice)
         self.runner = LocalRunner(p.runner_config(), worker_nice=p.worker_nice)
         self._poses = PoseHistory(POSE_HISTORY)  # odometry by stamp, to place the scans
+        # inputs stamped by another clock (a simulator's /clock without use_sim_time) are said
+        self._stamps = StampCheck(self.get_parameter("use_sim_time").value)
         self._pending_scan = None  # (Scan, monotonic time) waiting for its stamp's odometry
         self.world = None  # ecahd_core.sensing.LocalWorld once a map arrives (use_scan)
         self.refiner = None  # ecahd_core.planning.local.SegmentRefiner once a map arrives
@@ -253,12 +257,20 @@ class LocalRefiner(Node):
         # the poses of the last second by their stamps: a scan is placed with the pose at its
         # own stamp (there is no TF here), not the latest one the robot has moved on from
         stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        self._check_stamp("odometry", stamp, self.params.stale_timeout)
         self._poses.add(stamp, self.runner.pose)
         pending = self._pending_scan
         if pending is not None and (self._poses.covers(pending[0].stamp)
                                     or time.monotonic() - pending[1] > SCAN_POSE_WAIT):
             self._pending_scan = None
             self._submit_scan(pending[0])
+
+    def _check_stamp(self, what: str, stamp: float, tolerance: float) -> None:
+        """Warn (at most every few seconds) when ``what``'s stamp [s] disagrees with the node's
+        clock by more than ``tolerance`` [s], naming the likely cause and the fix."""
+        line = self._stamps.check(what, stamp, self._now(), tolerance)
+        if line is not None:
+            self.get_logger().warning(line)
 
     def _submit_scan(self, scan) -> None:
         """Fuse ``scan`` on the scan worker with the odometry pose at its stamp (interpolated;
@@ -283,6 +295,7 @@ class LocalRefiner(Node):
                         range_max=msg.range_max, stamp=stamp)
         except EcahdError as exc:
             raise EcahdError(f"scan ignored: {exc}") from None
+        self._check_stamp("scan", stamp, self.params.monitor_source_timeout or SCAN_TOLERANCE)
         if self._poses.covers(stamp):
             self._submit_scan(scan)
         else:  # odometry of its stamp not here yet: wait for it (a newer scan replaces it)

@@ -311,3 +311,28 @@ def test_a_scan_waits_for_the_odometry_of_its_stamp(rig, monkeypatch):
     odom(1.04, 1.52, 1.5, 0.06)
     assert len(submitted) == 3 and submitted[2][0] == pytest.approx((1.52, 1.5, 0.06))
     assert node.counters["scans_unsynced"] == 1
+
+
+def test_inputs_from_another_clock_are_said(rig):
+    """local_refiner on the wall clock (no use_sim_time) fed odometry and scans stamped by a
+    simulator's /clock (seconds since its start): it says so, naming use_sim_time, instead of
+    the collision monitor silently judging every scan decades old."""
+    from sensor_msgs.msg import LaserScan
+
+    r = rig(use_scan=True)
+    r.send_map()
+    node = r.node
+    r.spin_until(lambda: node.world is not None)
+    odom = Odometry()
+    odom.header.frame_id = "map"
+    odom.header.stamp.sec = 12  # sim time
+    odom.pose.pose = pose_from_xy_yaw(1.5, 1.5, 0.0)
+    node._on_odom(odom)
+    scan = LaserScan()
+    scan.header.frame_id = "base_scan"
+    scan.header.stamp.sec = 12
+    scan.angle_min, scan.angle_increment = -math.pi, 2 * math.pi / 8
+    scan.range_min, scan.range_max = 0.1, 8.0
+    scan.ranges = [1.0] * 8
+    node._on_scan(scan)
+    assert node._stamps.mismatches == 2 and node._stamps.stale == 0
