@@ -42,6 +42,8 @@ Subscribes:
         local_refiner when a segment is blocked: a re-plan from the pose (the second
         for a goal is A* round what is known, followed to the goal).
 Publishes:
+    /diagnostics (diagnostic_msgs/DiagnosticArray; every second): this node's health
+        (``ecahd_ros.diagnostics``).
     plan (nav_msgs/Path; reliable, transient_local, depth 1): the selected sparse waypoints
         (sd) or the whole path (astar, fd), first = robot pose, last = the goal exactly.
     plan_candidates (visualization_msgs/MarkerArray; reliable, depth 1): sd only: the N
@@ -56,9 +58,11 @@ Publishes:
 from __future__ import annotations
 
 import json
+import math
 import time
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import OccupancyGrid, Odometry, Path
 from rclpy.node import Node
@@ -71,6 +75,8 @@ from ecahd_core.planning.sparse import SparseDiffusion
 from ecahd_core.validation import validate_pose
 from ecahd_ros.callbacks import check_frame, guard, now_seconds
 from ecahd_ros.conversions import candidate_markers, msg_to_grid, timing_message, xy_to_path
+from ecahd_ros.diagnostics import (DIAGNOSTICS_PERIOD, Latencies, diagnostic_array,
+                                   node_status)
 from ecahd_ros.global_planner_params import PARAMETERS, GlobalPlannerParams
 from ecahd_ros.params import collision_cost, declare_parameters, make_robot, read_parameters
 from ecahd_ros.qos import MAP_QOS, PLAN_QOS, STREAM_QOS, VIZ_QOS
@@ -112,6 +118,10 @@ class GlobalPlanner(Node):
         self._cand_pub = self.create_publisher(MarkerArray, "plan_candidates", VIZ_QOS)
         self._timing_pub = self.create_publisher(String, "ecahd/timing", STREAM_QOS)
         self._ready_pub = self.create_publisher(String, "ecahd/planner_ready", MAP_QOS)
+        self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", STREAM_QOS)
+        self._plan_ms = Latencies()  # the last plans' wall times, for /diagnostics
+        self._plans = 0
+        self._map_time: float | None = None  # [s, node clock] when the map arrived
         self.create_subscription(OccupancyGrid, "map", guard(self, self._on_map), MAP_QOS)
         self.create_subscription(PoseStamped, "goal_pose", guard(self, self._on_goal),
                                  STREAM_QOS)
@@ -122,6 +132,7 @@ class GlobalPlanner(Node):
                                  STREAM_QOS)
         # a goal coalesced in a burst is planned within one period even without odometry
         self.create_timer(p.runner_config().min_plan_interval, guard(self, self._on_pending))
+        self.create_timer(DIAGNOSTICS_PERIOD, guard(self, self._publish_diagnostics))
         what = f"SD, N={p.num_candidates}, P^g={p.horizon}" if p.method == "sd" else p.method
         self.get_logger().info(f"global planner ready: {what}, robot {self.footprint.name!r}, "
                                "waiting for map and odom")
@@ -166,6 +177,7 @@ class GlobalPlanner(Node):
             built["fd"] = self._build_fd(grid)
         had_goal = self.goal is not None
         self.planning.set_map(grid, **built)
+        self._map_time = self._now()
         ms = (time.perf_counter() - t0) * 1e3
         spacing = self.planning.replan_spacing
         self.get_logger().info(f"map {grid.name!r} received ({grid.width} x {grid.height} "
@@ -266,6 +278,8 @@ class GlobalPlanner(Node):
             self.get_logger().warning(
                 f"no progress toward the next waypoint for {runner.stall_timeout:g} s: "
                 f"replanning from the current pose (timeout replan {runner.stalls} in a row)")
+        self._plan_ms.add(out.ms)
+        self._plans += 1
         stamp = self.get_clock().now()
         self._plan_pub.publish(xy_to_path(out.waypoints, frame, stamp.to_msg()))
         if out.sparse is not None:
@@ -280,6 +294,29 @@ class GlobalPlanner(Node):
         else:
             self.get_logger().info(line)
 
+
+    def _publish_diagnostics(self) -> None:
+        """This node's health on /diagnostics: planner and map, goal, plan latency, fallbacks."""
+        p, planning = self.params, self.planning
+        goal = self.goal
+        values = {
+            "method": p.method, "model": (p.sd_model or p.fd_model or f"shipped for {p.map_name}")
+            if p.method != "astar" else "A*",
+            "map": planning.grid.name if planning.grid is not None else "none",
+            "map_age_s": self._now() - self._map_time if self._map_time is not None else math.nan,
+            "goal": "none" if goal is None else f"{goal[0]:.2f}, {goal[1]:.2f}",
+            "plans": self._plans, "plan_ms_p50": self._plan_ms.quantile(0.5),
+            "plan_ms_p99": self._plan_ms.quantile(0.99), "fallbacks": planning.fallbacks,
+            "replan_spacing_m": planning.replan_spacing or "off"}
+        if not planning.ready:
+            level, message = "warn", "waiting for a map"
+        elif goal is not None and self.pose is None:
+            level, message = "warn", "a goal waits for odometry"
+        else:
+            level, message = "ok", "planning" if goal is not None else "ready, no goal"
+        self._diag_pub.publish(diagnostic_array(
+            [node_status("global_planner", level, message, values)],
+            self.get_clock().now().to_msg()))
 
 def main(args=None) -> None:
     spin_node(GlobalPlanner, args, name="global_planner")

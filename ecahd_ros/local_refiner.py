@@ -45,6 +45,8 @@ Subscribes:
         loads the DD model (in its own callback group: control goes on meanwhile); without a
         map the straight local plans are followed unchecked.
 Publishes:
+    /diagnostics (diagnostic_msgs/DiagnosticArray; every second): this node's health
+        (``ecahd_ros.diagnostics``); inputs stamped by another clock are also said in the log.
     cmd_vel (geometry_msgs/Twist, or TwistStamped with ``enable_stamped_cmd_vel``; reliable,
         depth 10) at ``control_rate``.
     local_plan (nav_msgs/Path; reliable, depth 1): the dense local plan being followed.
@@ -60,10 +62,12 @@ Publishes:
 """
 from __future__ import annotations
 
+import math
 import threading
 import time
 from functools import partial
 
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import OccupancyGrid, Odometry, Path
 from sensor_msgs.msg import LaserScan
@@ -82,6 +86,8 @@ from ecahd_ros.callbacks import check_frame, guard, now_seconds
 from ecahd_ros.clock_check import StampCheck
 from ecahd_ros.conversions import (footprint_markers, layout_to_msg, msg_to_grid, path_to_xy,
                                    timing_message, xy_to_path, yaw_from_quaternion)
+from ecahd_ros.diagnostics import (DIAGNOSTICS_PERIOD, Latencies, RateMeter,
+                                   diagnostic_array, node_status)
 from ecahd_ros.local_refiner_params import DYNAMIC, PARAMETERS, LocalRefinerParams
 from ecahd_ros.params import (collision_cost, declare_parameters, make_robot, on_parameter_change,
                               read_parameters)
@@ -144,6 +150,11 @@ class LocalRefiner(Node):
         self._timing_pub = self.create_publisher(String, "ecahd/timing", STREAM_QOS)
         self._replan_pub = self.create_publisher(String, "ecahd/replan", STREAM_QOS)
         self._costmap_pub = self.create_publisher(OccupancyGrid, "local_costmap", VIZ_QOS)
+        self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", STREAM_QOS)
+        self._control_ms = Latencies()  # the last control ticks' wall times
+        self._ticks = RateMeter()  # the control loop's measured rate
+        self._map_time: float | None = None  # [s, node clock] when the map's world was built
+        self._mismatches_seen = 0  # StampCheck.mismatches at the last /diagnostics
         inputs, maps = MutuallyExclusiveCallbackGroup(), MutuallyExclusiveCallbackGroup()
         control = MutuallyExclusiveCallbackGroup()
         self.create_subscription(Path, "plan", guard(self, self._on_plan), PLAN_QOS,
@@ -164,6 +175,8 @@ class LocalRefiner(Node):
             self.create_timer(1.0 / p.local_costmap_rate, guard(self, self._publish_costmap),
                               callback_group=sensing)
         on_parameter_change(self, PARAMETERS, lambda: self.params, self._apply_params)
+        self.create_timer(DIAGNOSTICS_PERIOD, guard(self, self._publish_diagnostics),
+                          callback_group=maps)
         self._last_reason = None
         dd = f"DD above c_th={p.c_th:g}" if p.dd_enabled else "DD disabled"
         self.get_logger().info(f"local refiner ready: {dd}, "
@@ -223,6 +236,7 @@ class LocalRefiner(Node):
             world = LocalWorld(grid, cost, p.local_costmap_config(), offset=p.scan_offset,
                                mark_moving=p.mark_moving_obstacles,
                                shuttles=p.monitor_shuttles)
+        self._map_time = self._now()
         with self._lock, self._world_lock:
             self.grid, self.planner, self.refiner, self.world = grid, planner, refiner, world
             self.runner.refine = refiner
@@ -361,6 +375,8 @@ class LocalRefiner(Node):
                 self.runner.v = v  # the controller ramps up from what was really commanded
         self._publish_cmd(v, w)
         ms = (time.perf_counter() - t0) * 1e3
+        self._control_ms.add(ms)
+        self._ticks.tick()
         stamp = self.get_clock().now()
         for kind, what in events:
             self._on_event(kind, what, stamp)
@@ -414,6 +430,40 @@ class LocalRefiner(Node):
         self.runner.close()
         super().destroy_node()
 
+
+    def _publish_diagnostics(self) -> None:
+        """This node's health on /diagnostics: map and DD, the control loop's rate and tick
+        latency, the collision monitor's actions, inputs from another clock."""
+        p, c = self.params, self.counters
+        rate = self._ticks.rate()
+        waypoints = self.runner.waypoints
+        values = {
+            "map": self.grid.name if self.grid is not None else "none",
+            "map_age_s": self._now() - self._map_time if self._map_time is not None else math.nan,
+            "dd": ("ready" if self.planner is not None and self.planner.dd is not None
+                   else "disabled" if not p.dd_enabled else "loading"),
+            "plan_points": 0 if waypoints is None else len(waypoints),
+            "control_rate_hz": rate, "control_rate_target_hz": p.control_rate,
+            "control_ms_p50": self._control_ms.quantile(0.5),
+            "control_ms_p99": self._control_ms.quantile(0.99), "dd_calls": self.dd_calls,
+            "monitor_stops": c["monitor_stop"], "monitor_slowdowns": c["monitor_slowdown"],
+            "monitor_yields": c["monitor_yield"], "scans": c["scans"],
+            "stamps_from_another_clock": self._stamps.mismatches,
+            "stale_stamps": self._stamps.stale}
+        mismatched = self._stamps.mismatches > self._mismatches_seen
+        self._mismatches_seen = self._stamps.mismatches
+        if self.grid is None:
+            level, message = "warn", "waiting for a map"
+        elif mismatched:
+            level, message = "warn", ("inputs stamped by another clock (use_sim_time?): see the "
+                                      "log")
+        elif len(self._control_ms) >= 10 and rate < 0.8 * p.control_rate:
+            level, message = "warn", f"control loop at {rate:.1f} Hz of {p.control_rate:g}"
+        else:
+            level, message = "ok", "following a plan" if waypoints is not None else "ready"
+        self._diag_pub.publish(diagnostic_array(
+            [node_status("local_refiner", level, message, values)],
+            self.get_clock().now().to_msg()))
 
 def main(args=None) -> None:
     # one executor thread: the local stage has its own worker (see ecahd_ros.spin)

@@ -529,3 +529,28 @@ def test_a_plan_toward_a_subgoal_is_followed_to_the_subgoal_when_its_legs_there_
     assert follow(replace(plan, waypoints=wp[:3])) == 2  # every leg free: the whole plan
     stage.settle = False
     assert follow(replace(plan, waypoints=wp[:3])) == 1
+
+
+def test_health_is_on_diagnostics(rig):
+    """/diagnostics: 'waiting for a map' (WARN) before the map; then OK with the plans'
+    latency once a goal is planned."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+
+    r = rig(num_candidates=4)
+    got = []
+    r.probe.create_subscription(DiagnosticArray, "/diagnostics", got.append, 10)
+    r.spin_until(lambda: got, timeout=5.0)
+    first = got[-1].status[0]
+    assert first.name == "ecahd_ros: global_planner" and first.level == DiagnosticStatus.WARN
+    assert first.message == "waiting for a map"
+    ready(r)
+    r.send_goal(GOAL)
+    r.spin_until(lambda: r.plans)
+    n = len(got)
+    r.spin_until(lambda: len(got) > n, timeout=5.0)
+    status = got[-1].status[0]
+    values = {kv.key: kv.value for kv in status.values}
+    assert status.level == DiagnosticStatus.OK and status.message == "planning"
+    assert values["map"] == "maze2d-large" and values["method"] == "sd"
+    assert int(values["plans"]) >= 1 and float(values["plan_ms_p50"]) > 0
+    assert values["fallbacks"] == "0" and values["goal"] == "6.50, 5.50"

@@ -336,3 +336,27 @@ def test_inputs_from_another_clock_are_said(rig):
     scan.ranges = [1.0] * 8
     node._on_scan(scan)
     assert node._stamps.mismatches == 2 and node._stamps.stale == 0
+
+
+def test_health_is_on_diagnostics(rig):
+    """/diagnostics says 'waiting for a map' (WARN) before the map, then OK with the control
+    loop's measured rate near control_rate and its tick latency."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+
+    r = rig()
+    got = []
+    r.probe.create_subscription(DiagnosticArray, "/diagnostics", got.append, 10)
+    r.spin_until(lambda: got, timeout=5.0)
+    first = got[-1].status[0]
+    assert first.name == "ecahd_ros: local_refiner" and first.level == DiagnosticStatus.WARN
+    assert first.message == "waiting for a map"
+    r.send_map()
+    n = len(got)
+    r.spin_until(lambda: len(got) >= n + 2, timeout=5.0)
+    status = got[-1].status[0]
+    values = {kv.key: kv.value for kv in status.values}
+    assert status.level == DiagnosticStatus.OK, status.message
+    assert values["map"] == "maze2d-large" and values["dd"] == "ready"
+    assert 0.5 * RATE < float(values["control_rate_hz"]) < 1.5 * RATE
+    assert 0 < float(values["control_ms_p50"]) <= float(values["control_ms_p99"])
+    assert values["stamps_from_another_clock"] == "0"
