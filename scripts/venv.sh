@@ -8,11 +8,14 @@ if [ ! -x "$VENV/bin/python" ]; then
     python3 -m venv "$VENV"
 fi
 STAMP="$VENV/.ecahd-installed"
-WANT="$(cat "$ROOT/setup.py" "$ROOT/setup.cfg" | sha256sum | cut -d' ' -f1)"
+WANT="$(cat "$ROOT/setup.py" "$ROOT/setup.cfg" "$ROOT"/interfaces/*/package.xml "$ROOT"/interfaces/*/CMakeLists.txt \
+    "$ROOT"/interfaces/*/msg/* "$ROOT/scripts/build_interfaces.sh" | sha256sum | cut -d' ' -f1)"
 if [ ! -f "$STAMP" ] || [ "$(cat "$STAMP")" != "$WANT" ]; then
     echo "[ecahd] installing ecahd_ros and its dependencies into $VENV"
     "$VENV/bin/python" -m pip install --quiet --upgrade pip
-    "$VENV/bin/python" -m pip install --quiet -e "$ROOT[test]"
+    "$VENV/bin/python" -m pip install --quiet -e "$ROOT[test,interfaces]"
+    mkdir -p "$VENV/.interfaces"
+    bash "$ROOT/scripts/build_interfaces.sh" "$VENV"
     echo "$WANT" > "$STAMP"
 fi
 export PATH="$VENV/bin:$PATH"
