@@ -271,3 +271,11 @@ class TransformBuffer:
         for frame in from_target:
             down = self._links[frame].at(time, frame, tolerance) * down
         return down.inverse() * up
+
+    def pose_in(self, target: str, source: str, time: float | None, pose, *,
+                tolerance: float = 0.0) -> tuple[float, float, float]:
+        """A planar ``pose`` (x [m], y [m], yaw [rad]) given in ``source`` at ``time`` [s], in
+        ``target``: (x, y, yaw). Raises as :meth:`lookup`."""
+        x, y, yaw = (float(v) for v in pose)
+        return (self.lookup(target, source, time, tolerance=tolerance)
+                * Transform.from_xy_yaw(x, y, yaw)).xy_yaw()

@@ -81,6 +81,7 @@ from ecahd_ros.global_planner_params import PARAMETERS, GlobalPlannerParams
 from ecahd_ros.params import collision_cost, declare_parameters, make_robot, read_parameters
 from ecahd_ros.qos import MAP_QOS, PLAN_QOS, STREAM_QOS, VIZ_QOS
 from ecahd_ros.spin import spin_node
+from ecahd_ros.tf_listener import TfListener, odometry_pose
 
 # re-exported: the node module is where users look for its parameters and constants
 __all__ = ["ASTAR_SPACING", "GlobalPlanner", "GlobalPlannerParams", "PARAMETERS", "main"]
@@ -114,6 +115,7 @@ class GlobalPlanner(Node):
                                       clock=self._now,
                                       generator=torch.Generator().manual_seed(p.seed))
         self.pose: np.ndarray | None = None  # (2,) [m] latest valid odometry position
+        self.tf = TfListener(self)  # odometry in odom is placed in global_frame through /tf
         self._plan_pub = self.create_publisher(Path, "plan", PLAN_QOS)
         self._cand_pub = self.create_publisher(MarkerArray, "plan_candidates", VIZ_QOS)
         self._timing_pub = self.create_publisher(String, "ecahd/timing", STREAM_QOS)
@@ -228,11 +230,10 @@ class GlobalPlanner(Node):
         self._step()
 
     def _on_odom(self, msg: Odometry) -> None:
-        if msg.header.frame_id:
-            check_frame(msg.header.frame_id, self.params.global_frame, "odometry")
-        pos = msg.pose.pose.position
+        p = self.params
         try:
-            x, y, _ = validate_pose((pos.x, pos.y, 0.0), "odometry pose")
+            x, y, _ = validate_pose(odometry_pose(msg, self.tf.buffer, p.global_frame,
+                                                  p.transform_tolerance), "odometry pose")
         except PlanningError as exc:
             raise PlanningError(f"odometry ignored: {exc}") from None
         self.pose = np.array([x, y])

@@ -47,8 +47,8 @@ PARAMETERS = [
     ParamSpec("epsilon", _SPARSE.epsilon, "[m] goal-reaching radius of the best-of-N rule"),
     ParamSpec("selection", "collision_aware", f"best-of-N rule: {list(SELECTION_RULES)} "
                                               "(shortest_reaching: Sec. III-A's)"),
-    *shared("robot", "footprint", "footprint_padding", "global_frame", "clearance_margin",
-            "cost_margin"),
+    *shared("robot", "footprint", "footprint_padding", "global_frame", "transform_tolerance",
+            "clearance_margin", "cost_margin"),
     ParamSpec("waypoint_tolerance", _RUNNER.waypoint_tolerance, "[m] reaching the next waypoint this close replans "
                                          "with horizon P^g - p (sd); the goal this close is "
                                          "reached"),
@@ -105,6 +105,7 @@ class GlobalPlannerParams:
         require(self.inference_precision in PRECISION_CHOICES, "inference_precision",
                 self.inference_precision, f"one of {list(PRECISION_CHOICES)}")
         require_non_negative(self, "ddim_steps", "footprint_padding", "seed", "replan_timeout",
+                             "transform_tolerance",
                              "obstacle_memory", "clearance_margin", "max_spacing", "leg_repair")
         require_cost_margin(self)
         require(self.repair_reach > 0 or self.repair_reach == -1, "repair_reach",

@@ -85,14 +85,15 @@ from ecahd_core.worker import LatestWorker
 from ecahd_ros.callbacks import check_frame, guard, now_seconds
 from ecahd_ros.clock_check import StampCheck
 from ecahd_ros.conversions import (footprint_markers, layout_to_msg, msg_to_grid, path_to_xy,
-                                   timing_message, xy_to_path, yaw_from_quaternion)
-from ecahd_ros.diagnostics import (DIAGNOSTICS_PERIOD, Latencies, RateMeter,
-                                   diagnostic_array, node_status)
+                                   timing_message, xy_to_path)
+from ecahd_ros.diagnostics import (DIAGNOSTICS_PERIOD, Latencies, RateMeter, diagnostic_array,
+                                   node_status)
 from ecahd_ros.local_refiner_params import DYNAMIC, PARAMETERS, LocalRefinerParams
 from ecahd_ros.params import (collision_cost, declare_parameters, make_robot, on_parameter_change,
                               read_parameters)
 from ecahd_ros.qos import MAP_QOS, PLAN_QOS, SCAN_QOS, STREAM_QOS, VIZ_QOS
 from ecahd_ros.spin import spin_node
+from ecahd_ros.tf_listener import TfListener, odometry_pose
 
 POSE_HISTORY = 1.0  # [s] of odometry poses kept to place scans by their stamps
 SCAN_POSE_WAIT = 0.2  # [s] a scan waits at most this long for the odometry of its stamp
@@ -133,6 +134,7 @@ class LocalRefiner(Node):
         # inputs stamped by another clock (a simulator's /clock without use_sim_time) are said
         self._stamps = StampCheck(self.get_parameter("use_sim_time").value)
         self._pending_scan = None  # (Scan, monotonic time) waiting for its stamp's odometry
+        self.tf = None  # TfListener: odometry in odom placed in global_frame through /tf
         self.world = None  # ecahd_core.sensing.LocalWorld once a map arrives (use_scan)
         self.refiner = None  # ecahd_core.planning.local.SegmentRefiner once a map arrives
         self.monitor = None
@@ -161,6 +163,7 @@ class LocalRefiner(Node):
                                  callback_group=inputs)
         self.create_subscription(Odometry, "odom", guard(self, self._on_odom), STREAM_QOS,
                                  callback_group=inputs)
+        self.tf = TfListener(self, callback_group=inputs)
         self.create_subscription(OccupancyGrid, "map", guard(self, self._on_map), MAP_QOS,
                                  callback_group=maps)
         # steady: the sim steps /clock by 1 / rate_hz (20 ms), so a 20 Hz timer on sim time
@@ -259,10 +262,8 @@ class LocalRefiner(Node):
                 raise EcahdError(f"plan ignored: {exc}") from None
 
     def _on_odom(self, msg: Odometry) -> None:
-        if msg.header.frame_id:
-            check_frame(msg.header.frame_id, self.params.global_frame, "odometry")
-        pose = msg.pose.pose
-        xyyaw = (pose.position.x, pose.position.y, yaw_from_quaternion(pose.orientation))
+        p = self.params
+        xyyaw = odometry_pose(msg, self.tf.buffer, p.global_frame, p.transform_tolerance)
         with self._lock:
             try:
                 self.runner.set_pose(xyyaw, self._now())

@@ -17,7 +17,7 @@ _MONITOR = CollisionMonitorConfig()
 PARAMETERS = [
     ParamSpec("dd_model", "", "DD checkpoint path; '' = the shipped model for map_name"),
     *shared("map_name", "robot", "footprint", "footprint_padding", "global_frame",
-            "clearance_margin", "cost_margin"),
+            "transform_tolerance", "clearance_margin", "cost_margin"),
     ParamSpec("c_th", DenseConfig().c_th, "DD refines a local plan whose collision cost c^l "
                                           "exceeds this"),
     ParamSpec("dd_enabled", True, "run Dense Diffusion at all; false: follow the straight local "
@@ -121,6 +121,7 @@ class LocalRefinerParams:
                          "torch_threads")
         require_cost_margin(self)
         require_non_negative(self, "c_th", "footprint_padding", "plan_timeout", "seed",
+                             "transform_tolerance",
                              "clearance_margin",
                              "polish_steps", "prepare_ahead", "obstacle_persistence",
                              "monitor_prediction_growth", "monitor_beat_horizon")

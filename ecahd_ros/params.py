@@ -154,7 +154,11 @@ SHARED = {spec.name: spec for spec in [
     ParamSpec("robot", "circle", "footprint preset: circle, quadruped, humanoid"),
     ParamSpec("footprint", "", "Nav2 footprint polygon '[[x, y], ...]' [m]; overrides robot"),
     ParamSpec("footprint_padding", 0.0, "[m] grows the footprint (Nav2 footprint_padding)"),
-    ParamSpec("global_frame", "map", "frame of goals, odometry poses and plans"),
+    ParamSpec("global_frame", "map", "frame of goals and plans (REP-105's map); odometry in "
+                                     "another frame (odom) is placed in it through /tf"),
+    ParamSpec("transform_tolerance", 0.3, "[s] a transform of /tf at most this much older than "
+                                          "the odometry it places is used (Nav2's "
+                                          "transform_tolerance)"),
     ParamSpec("clearance_margin", 0.02, "[m] the exact checker judges local plans and "
                                         "waypoints with the footprint grown by this (ours: "
                                         "room for the controller's tracking error)"),

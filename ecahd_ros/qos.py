@@ -8,6 +8,8 @@
     VIZ_QOS     RViz-only topics (markers, local_plan, camera): reliable, volatile, depth 1.
     SCAN_QOS    scan subscriptions: rclpy's sensor-data profile (best effort, depth 5), which
                 matches reliable and best-effort LiDAR drivers alike.
+    TF_QOS      /tf: reliable, volatile, depth 100, as tf2_ros.
+    TF_STATIC_QOS  /tf_static: reliable, transient_local, depth 100 (late joiners get them).
 """
 from __future__ import annotations
 
@@ -20,3 +22,6 @@ PLAN_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
 STREAM_QOS = QoSProfile(depth=10)
 VIZ_QOS = QoSProfile(depth=1)
 SCAN_QOS = qos_profile_sensor_data
+TF_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+TF_STATIC_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                           durability=DurabilityPolicy.TRANSIENT_LOCAL)

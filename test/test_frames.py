@@ -100,3 +100,11 @@ def test_slerp_takes_the_shorter_way_round():
     tf.set_transform("odom", "base_link", 1.0, Transform.from_xy_yaw(0, 0, math.radians(-170)))
     # halfway between 170 and -170 deg is 180 deg, not 0
     assert abs(tf.lookup("odom", "base_link", 0.5).yaw()) == pytest.approx(math.pi)
+
+
+def test_a_pose_in_odom_is_placed_in_map():
+    tf = robot_buffer()
+    # odom's (1, 0) facing +x is map's (1, 2 + 1) facing +y at 10 s (map -> odom: (1, 2), 90 deg)
+    assert tf.pose_in("map", "odom", 10.0, (1.0, 0.0, 0.0)) == pytest.approx(
+        (1.0, 3.0, math.pi / 2))
+    assert tf.pose_in("odom", "odom", None, (0.5, -0.5, 0.1)) == pytest.approx((0.5, -0.5, 0.1))

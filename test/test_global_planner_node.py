@@ -554,3 +554,31 @@ def test_health_is_on_diagnostics(rig):
     assert values["map"] == "maze2d-large" and values["method"] == "sd"
     assert int(values["plans"]) >= 1 and float(values["plan_ms_p50"]) > 0
     assert values["fallbacks"] == "0" and values["goal"] == "6.50, 5.50"
+
+
+def test_odometry_in_odom_is_placed_in_map_through_tf(rig):
+    """REP-105: the base driver's odometry in `odom`, the localisation's `map -> odom` on /tf
+    (here odom's origin at map (1, 0.5), turned 90 deg): the planner's pose is in `map`; without
+    the transform the odometry is refused, naming the missing transform."""
+    import math
+
+    from geometry_msgs.msg import TransformStamped
+    from tf2_msgs.msg import TFMessage
+
+    r = rig(num_candidates=4)
+    r.send_map()
+    r.spin_until(lambda: r.planner.ready)
+    r.send_odom((0.5, 0.5), frame="odom")  # before any tf: refused
+    r.spin_for(0.2)
+    assert r.planner.pose is None
+    tf_pub = r.probe.create_publisher(TFMessage, "/tf", 10)
+    t = TransformStamped()
+    t.header.frame_id, t.child_frame_id = "map", "odom"
+    t.transform.translation.x, t.transform.translation.y = 1.0, 0.5
+    t.transform.rotation.z, t.transform.rotation.w = math.sin(math.pi / 4), math.cos(math.pi / 4)
+    r.spin_until(lambda: tf_pub.get_subscription_count() > 0)
+    tf_pub.publish(TFMessage(transforms=[t]))
+    r.spin_until(lambda: r.planner.tf.received >= 1)
+    r.send_odom((1.0, -0.5), frame="odom")  # odom's (1, -0.5) is map's (1 + 0.5, 0.5 + 1)
+    r.spin_until(lambda: r.planner.pose is not None)
+    np.testing.assert_allclose(r.planner.pose, [1.5, 1.5], atol=1e-9)

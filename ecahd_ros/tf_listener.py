@@ -1,0 +1,74 @@
+"""tf for the nodes without tf2_ros (tf2_ros is not on PyPI): :class:`TfListener` fills an
+:class:`~ecahd_core.frames.TransformBuffer` from ``/tf`` and ``/tf_static`` as
+tf2_ros.TransformListener does, and :func:`odometry_pose` places an odometry message's pose in
+the global frame through it (REP-105: odometry in ``odom``, ``map -> odom`` from the
+localisation). Odometry already in the global frame (a simulator's ground truth) is used as it
+is."""
+from __future__ import annotations
+
+from nav_msgs.msg import Odometry
+from rclpy.node import Node
+from tf2_msgs.msg import TFMessage
+
+from ecahd_core.errors import EcahdError
+from ecahd_core.frames import FrameError, Transform, TransformBuffer
+from ecahd_ros.conversions import yaw_from_quaternion
+from ecahd_ros.qos import TF_QOS, TF_STATIC_QOS
+
+
+def stamp_seconds(stamp) -> float:
+    """builtin_interfaces/Time -> [s]."""
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+class TfListener:
+    """Subscribes ``/tf`` and ``/tf_static`` on ``node`` and keeps their transforms in
+    :attr:`buffer`. A malformed transform (non-finite, not a unit rotation, a loop, a second
+    parent) is logged in one line and skipped; the others of its message are kept."""
+
+    def __init__(self, node: Node, buffer: TransformBuffer | None = None, *,
+                 callback_group=None) -> None:
+        self.node = node
+        self.buffer = buffer or TransformBuffer()
+        self.received = 0  # transforms kept
+        self.rejected = 0  # transforms skipped
+        node.create_subscription(TFMessage, "/tf", lambda m: self._on_tf(m, False), TF_QOS,
+                                 callback_group=callback_group)
+        node.create_subscription(TFMessage, "/tf_static", lambda m: self._on_tf(m, True),
+                                 TF_STATIC_QOS, callback_group=callback_group)
+
+    def _on_tf(self, msg: TFMessage, static: bool) -> None:
+        for t in msg.transforms:
+            # tf2 strips a leading '/' from frame ids (ROS 1's convention) with a warning
+            parent, child = t.header.frame_id.lstrip("/"), t.child_frame_id.lstrip("/")
+            tr, q = t.transform.translation, t.transform.rotation
+            try:
+                transform = Transform.checked((tr.x, tr.y, tr.z), (q.x, q.y, q.z, q.w))
+                self.buffer.set_transform(parent, child, stamp_seconds(t.header.stamp),
+                                          transform, static=static)
+                self.received += 1
+            except FrameError as exc:
+                self.rejected += 1
+                self.node.get_logger().error(
+                    f"{'/tf_static' if static else '/tf'} transform {parent!r} -> {child!r} "
+                    f"skipped: {exc}", throttle_duration_sec=5.0)
+
+
+def odometry_pose(msg: Odometry, buffer: TransformBuffer, global_frame: str,
+                  tolerance: float) -> tuple[float, float, float]:
+    """The robot's (x [m], y [m], yaw [rad]) in ``global_frame`` from an odometry message: as
+    it is when its frame is ``global_frame`` (or empty), else through ``buffer``'s transform
+    ``global_frame -> frame`` at the message's stamp (``tolerance`` [s]: Nav2's
+    transform_tolerance). Raises EcahdError naming the frames and the problem."""
+    pose = msg.pose.pose
+    xyyaw = (pose.position.x, pose.position.y, yaw_from_quaternion(pose.orientation))
+    frame = msg.header.frame_id.lstrip("/")
+    if not frame or frame == global_frame:
+        return xyyaw
+    try:
+        return buffer.pose_in(global_frame, frame, stamp_seconds(msg.header.stamp), xyyaw,
+                              tolerance=tolerance)
+    except FrameError as exc:
+        raise EcahdError(f"odometry in frame {frame!r} ignored: no transform {global_frame} -> "
+                         f"{frame} at its stamp ({exc}); is the localisation (AMCL, SLAM) "
+                         f"publishing /tf?") from None
