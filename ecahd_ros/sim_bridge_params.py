@@ -34,6 +34,11 @@ PARAMETERS = [
     ParamSpec("scan_noise_std", 0.0, "[m] standard deviation of Gaussian range noise"),
     *shared("scan_offset_x", "scan_offset_y", "scan_offset_yaw"),
     ParamSpec("scan_frame_id", "base_scan", "header.frame_id of the scans"),
+    ParamSpec("odom_frame", "map", "frame of odom: 'map' (the true pose, /tf map -> base_link), "
+                                   "or a robot's odometry frame such as 'odom' (REP-105: odom "
+                                   "from where the robot started, /tf odom -> base_link, and a "
+                                   "localisation stand-in's map -> odom); /tf_static always "
+                                   "holds base_link -> scan_frame_id"),
     ParamSpec("seed", 0, "seed of the simulator's random generator (scan noise)"),
     ParamSpec("obstacles_file", "", "scenario YAML of obstacles that are not on the map "
                                     "('' = none); dynamic: setting it replaces the obstacles "

@@ -6,6 +6,7 @@ localisation). Odometry already in the global frame (a simulator's ground truth)
 is."""
 from __future__ import annotations
 
+from geometry_msgs.msg import TransformStamped
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from tf2_msgs.msg import TFMessage
@@ -72,3 +73,15 @@ def odometry_pose(msg: Odometry, buffer: TransformBuffer, global_frame: str,
         raise EcahdError(f"odometry in frame {frame!r} ignored: no transform {global_frame} -> "
                          f"{frame} at its stamp ({exc}); is the localisation (AMCL, SLAM) "
                          f"publishing /tf?") from None
+
+
+def transform_stamped(parent: str, child: str, stamp, transform: Transform) -> TransformStamped:
+    """geometry_msgs/TransformStamped of ``child`` in ``parent`` at ``stamp``
+    (builtin_interfaces/Time)."""
+    t = TransformStamped()
+    t.header.stamp, t.header.frame_id, t.child_frame_id = stamp, parent, child
+    t.transform.translation.x, t.transform.translation.y, t.transform.translation.z = (
+        float(v) for v in transform.translation)
+    (t.transform.rotation.x, t.transform.rotation.y, t.transform.rotation.z,
+     t.transform.rotation.w) = (float(v) for v in transform.rotation)
+    return t

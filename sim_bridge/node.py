@@ -32,9 +32,15 @@ Parameters (read-only: they configure the simulator at start-up):
 
 Publishes:
     map (nav_msgs/OccupancyGrid; reliable, transient_local, depth 1): the simulated walls.
-    odom (nav_msgs/Odometry; reliable, depth 10): every step. There is no tf here, so the pose is
-        given in map coordinates: header.frame_id "map", child_frame_id "base_link", twist in
+    odom (nav_msgs/Odometry; reliable, depth 10): every step, in ``odom_frame``: "map" (the
+        default) gives the true pose in map coordinates; "odom" gives it from where the robot
+        started (REP-105). header.frame_id ``odom_frame``, child_frame_id "base_link", twist in
         base_link.
+    /tf (tf2_msgs/TFMessage; reliable, depth 100): every step, ``odom_frame`` -> base_link
+        and, with an odometry frame, map -> ``odom_frame`` (the start pose: a localisation
+        stand-in without drift).
+    /tf_static (tf2_msgs/TFMessage; reliable, transient_local): base_link -> scan_frame_id from
+        the scan_offset_* parameters.
     clock (rosgraph_msgs/Clock; reliable, depth 10): simulated time, every step.
     collision (std_msgs/Bool; reliable, depth 10): every step, true when the robot's shape hit a
         wall or an obstacle during that step.
@@ -43,9 +49,9 @@ Publishes:
         "obstacle": index in obstacles_file's list or null, "x": [m], "y": [m],
         "contact_count": n}`` ("kind" is the first of moving, static, wall when a step hit
         several), so a bag tells obstacle contacts from wall contacts.
-    scan (sensor_msgs/LaserScan; reliable, depth 10): at scan_rate_hz of sim time. There is no
-        TF tree here: a scan's pose is the ``odom`` pose at its stamp (the sim time of the step)
-        composed with the scan_offset_* transform; frame scan_frame_id. It sees walls and
+    scan (sensor_msgs/LaserScan; reliable, depth 10): at scan_rate_hz of sim time. A scan's
+        pose is the robot's pose at its stamp (the sim time of the step) composed with the
+        scan_offset_* transform (base_link -> scan_frame_id on /tf_static); frame scan_frame_id. It sees walls and
         obstacles, not the robot itself.
     sim_obstacles (visualization_msgs/MarkerArray; reliable, depth 1): the true obstacles as
         CUBE / CYLINDER markers (id = index in the scenario) in frame "map", 1 m high, at
@@ -78,16 +84,19 @@ from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import Image, LaserScan
 from std_msgs.msg import Bool, String
+from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ecahd_core.errors import EcahdError
+from ecahd_core.frames import Transform
 from ecahd_core.scenario import Obstacle, read_scenario
 from ecahd_ros.conversions import grid_to_msg, pose_from_xy_yaw, yaw_from_quaternion
-from ecahd_ros.qos import MAP_QOS, STREAM_QOS, VIZ_QOS
+from ecahd_ros.qos import MAP_QOS, STREAM_QOS, TF_QOS, TF_STATIC_QOS, VIZ_QOS
 from ecahd_ros.params import (declare_parameters, parameters_dataclass, read_parameters, require,
                               require_non_negative, require_positive)
 from ecahd_ros.sim_bridge_params import DYNAMIC, PARAMETERS  # every parameter, declared once
 from ecahd_ros.spin import spin_node
+from ecahd_ros.tf_listener import transform_stamped
 from sim_bridge.sim import WALL_HEIGHT, MazeSim, SimConfig, SimError, SimState, scan_angles
 
 CAMERA_SIZE = 256  # [px] longer side of the top-down image
@@ -110,6 +119,9 @@ class SimBridgeParams:
                 self.scan_range_max, f"> scan_range_min ({self.scan_range_min})")
         require(bool(self.scan_frame_id.strip()), "scan_frame_id", self.scan_frame_id,
                 "a frame name")
+        require(bool(self.odom_frame.strip()) and self.odom_frame not in (BASE_FRAME,
+                                                                       self.scan_frame_id),
+                "odom_frame", self.odom_frame, "'map' or an odometry frame such as 'odom'")
 
     @property
     def scan_offset(self) -> tuple[float, float, float]:
@@ -205,6 +217,15 @@ class SimBridge(Node):
         self._scan_pub = (self.create_publisher(LaserScan, "scan", STREAM_QOS)
                           if p.publish_scan else None)
         self._obstacles_pub = self.create_publisher(MarkerArray, "sim_obstacles", VIZ_QOS)
+        self._tf_pub = self.create_publisher(TFMessage, "/tf", TF_QOS)
+        self._tf_static_pub = self.create_publisher(TFMessage, "/tf_static", TF_STATIC_QOS)
+        # REP-105: odometry starts where the robot starts; the stand-in localisation publishes
+        # map -> odom there (no drift)
+        self._odom_origin = (Transform.identity() if p.odom_frame == MAP_FRAME
+                             else Transform.from_xy_yaw(p.start_x, p.start_y, p.start_yaw))
+        self._tf_static_pub.publish(TFMessage(transforms=[transform_stamped(
+            BASE_FRAME, p.scan_frame_id, stamp(self.sim.state.t),
+            Transform.from_xy_yaw(*p.scan_offset))]))
         self.add_on_set_parameters_callback(self._on_set_parameters)
         cmd_type = TwistStamped if p.enable_stamped_cmd_vel else Twist
         self.create_subscription(cmd_type, "cmd_vel", self._on_cmd_vel, STREAM_QOS)
@@ -283,12 +304,18 @@ class SimBridge(Node):
     def _publish(self, state: SimState) -> None:
         now = stamp(state.t)
         self._clock_pub.publish(ClockMsg(clock=now))
+        frame = self.params.odom_frame
+        base = self._odom_origin.inverse() * Transform.from_xy_yaw(state.x, state.y, state.yaw)
         odom = Odometry()
-        odom.header.stamp, odom.header.frame_id = now, MAP_FRAME
+        odom.header.stamp, odom.header.frame_id = now, frame
         odom.child_frame_id = BASE_FRAME
-        odom.pose.pose = pose_from_xy_yaw(state.x, state.y, state.yaw)
+        odom.pose.pose = pose_from_xy_yaw(*base.xy_yaw())
         odom.twist.twist.linear.x, odom.twist.twist.angular.z = state.v, state.w
         self._odom_pub.publish(odom)
+        transforms = [transform_stamped(frame, BASE_FRAME, now, base)]
+        if frame != MAP_FRAME:
+            transforms.append(transform_stamped(MAP_FRAME, frame, now, self._odom_origin))
+        self._tf_pub.publish(TFMessage(transforms=transforms))
         self._collision_pub.publish(Bool(data=state.in_contact))
         if state.in_contact:
             self._detail_pub.publish(String(data=json.dumps({

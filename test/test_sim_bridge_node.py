@@ -239,3 +239,61 @@ def test_obstacles_never_appear_on_the_map(bridge_setup, tmp_path):
     spin_until(executor, lambda: received)
     assert np.array_equal(msg_to_grid(received[0]).occupied,
                           builtin_map("maze2d-umaze", 0.1).occupied)
+
+
+@pytest.mark.parametrize("odom_frame", ["map", "odom"])
+def test_tf_as_a_robot_publishes_it(bridge_setup, odom_frame):
+    """REP-105: with odom_frame 'odom' the odometry starts where the robot starts, /tf holds
+    odom -> base_link and the stand-in localisation's map -> odom; with 'map', map ->
+    base_link. Either way, map -> base_link through /tf is the simulated pose, and /tf_static
+    holds base_link -> base_scan from scan_offset_*."""
+    from tf2_msgs.msg import TFMessage
+
+    from ecahd_core.frames import TransformBuffer
+    from ecahd_ros.qos import TF_QOS, TF_STATIC_QOS
+    from ecahd_ros.tf_listener import stamp_seconds
+
+    bridge, probe, executor = bridge_setup(odom_frame=odom_frame, start_yaw=0.4,
+                                           scan_offset_x=0.1, scan_offset_yaw=math.pi)
+    buffer, odoms = TransformBuffer(), []
+
+    def feed(msg, static):
+        for t in msg.transforms:
+            tr, q = t.transform.translation, t.transform.rotation
+            from ecahd_core.frames import Transform
+            buffer.set_transform(t.header.frame_id, t.child_frame_id,
+                                 stamp_seconds(t.header.stamp),
+                                 Transform.checked((tr.x, tr.y, tr.z), (q.x, q.y, q.z, q.w)),
+                                 static=static)
+
+    probe.create_subscription(TFMessage, "/tf", lambda m: feed(m, False), TF_QOS)
+    probe.create_subscription(TFMessage, "/tf_static", lambda m: feed(m, True), TF_STATIC_QOS)
+    probe.create_subscription(Odometry, "odom", odoms.append, 10)
+    cmd = probe.create_publisher(Twist, "cmd_vel", 10)
+    twist = Twist()
+    twist.linear.x, twist.angular.z = 0.3, 0.2
+    spin_until(executor, lambda: cmd.get_subscription_count() > 0)
+    for _ in range(30):
+        cmd.publish(twist)
+        executor.spin_once(timeout_sec=0.01)
+    spin_until(executor, lambda: len(odoms) > 20 and "base_scan" in buffer.frames())
+    assert odoms[-1].header.frame_id == odom_frame
+    if odom_frame == "odom":  # odometry from where the robot started; map -> odom is that pose
+        first = odoms[0].pose.pose
+        assert (first.position.x, first.position.y) == pytest.approx((0.0, 0.0), abs=0.05)
+        assert buffer.lookup("map", "odom").xy_yaw() == pytest.approx((START[0], START[1], 0.4))
+    # every odometry message, placed in map through /tf at its stamp, is where /tf puts
+    # base_link; the robot drove (0.3 m/s, turning), so these are not all the start pose
+    moved = 0
+    for msg in odoms[-10:]:
+        t = stamp_seconds(msg.header.stamp)
+        pose = msg.pose.pose
+        want = buffer.pose_in("map", odom_frame, t, (pose.position.x, pose.position.y,
+                                                     yaw_from_quaternion(pose.orientation)))
+        got = buffer.lookup("map", "base_link", t).xy_yaw()
+        assert got == pytest.approx(want, abs=1e-6)
+        moved += np.hypot(got[0] - START[0], got[1] - START[1]) > 0.01
+    assert moved
+    scan = buffer.lookup("base_link", "base_scan")
+    assert scan.translation == pytest.approx([0.1, 0.0, 0.0])
+    assert abs(scan.yaw()) == pytest.approx(math.pi)
