@@ -379,11 +379,13 @@ class LocalWorld:
         # (stamp, (K, 2) moving points, (K, 2) their velocities) of the last SHUTTLE_MEMORY s
         self._trail: deque[tuple[float, np.ndarray, np.ndarray]] = deque()
 
-    def add_scan(self, pose, scan: Scan) -> None:
-        """A scan taken at ``pose`` (x, y, yaw) of base_link."""
+    def add_scan(self, pose, scan: Scan, offset=None) -> None:
+        """A scan taken at ``pose`` (x, y, yaw) of base_link by a sensor mounted at ``offset``
+        (x [m], y [m], yaw [rad]) on base_link (None: :attr:`offset`)."""
+        offset = self.offset if offset is None else tuple(float(v) for v in offset)
         before = self.window.obstacle_mask().copy()
         beams = valid_beams(scan)  # (M,) indices of the returns
-        every = scan_points(pose, scan, self.offset)  # (M, 2)
+        every = scan_points(pose, scan, offset)  # (M, 2)
         # returns from the static map's obstacles are known: the planner and the exact checker
         # keep the footprint off them; the collision monitor guards against the rest
         unmapped = ~self.window.is_known(every)
@@ -403,7 +405,7 @@ class LocalWorld:
         self.window.update(pose, scan.ranges, angle_min=scan.angle_min,
                            angle_increment=scan.angle_increment, range_min=scan.range_min,
                            range_max=scan.range_max, stamp=scan.stamp,
-                           sensor_offset=self.offset, mark=mark)
+                           sensor_offset=offset, mark=mark)
         if mark is not None and moving.any():  # marks it left before its motion was known
             self.window.forget(points[moving], MOVER_GAP)
         self.seen = SeenObstacles(points, velocities, scan.stamp,

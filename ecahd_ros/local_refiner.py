@@ -78,6 +78,7 @@ from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
 from ecahd_core.errors import EcahdError
+from ecahd_core.frames import FrameError
 from ecahd_core.planning.local import LocalRunner, SegmentResult, judge_items
 from ecahd_core.planning.dense import DenseConfig, DenseStage
 from ecahd_core.sensing import PoseHistory
@@ -134,6 +135,7 @@ class LocalRefiner(Node):
         # inputs stamped by another clock (a simulator's /clock without use_sim_time) are said
         self._stamps = StampCheck(self.get_parameter("use_sim_time").value)
         self._pending_scan = None  # (Scan, monotonic time) waiting for its stamp's odometry
+        self._scan_frame = ""  # the scans' frame (placed on the base by tf when it knows it)
         self.tf = None  # TfListener: odometry in odom placed in global_frame through /tf
         self.world = None  # ecahd_core.sensing.LocalWorld once a map arrives (use_scan)
         self.refiner = None  # ecahd_core.planning.local.SegmentRefiner once a map arrives
@@ -294,7 +296,16 @@ class LocalRefiner(Node):
         if not self._poses.covers(scan.stamp):
             self.counters["scans_unsynced"] += 1
         pose = self._poses.at(scan.stamp) or self.runner.pose
-        self._scan_worker.submit((pose, scan))
+        self._scan_worker.submit((pose, scan, self._mounting(self._scan_frame)))
+
+    def _mounting(self, frame: str) -> tuple[float, float, float]:
+        """The scanner's (x [m], y [m], yaw [rad]) on robot_base_frame: from /tf_static (or
+        /tf) where the tree joins ``frame`` to the base, else the scan_offset_* parameters."""
+        p = self.params
+        try:
+            return self.tf.buffer.lookup(p.robot_base_frame, frame).xy_yaw()
+        except FrameError:
+            return p.scan_offset
 
     def _on_scan(self, msg: LaserScan) -> None:
         """Validate the scan and place it with the odometry pose at its stamp here; fuse it
@@ -303,6 +314,7 @@ class LocalRefiner(Node):
 
         if self.world is None or self.runner.pose is None:
             return
+        self._scan_frame = msg.header.frame_id.lstrip("/")
         stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
         try:
             scan = Scan(ranges=msg.ranges, angle_min=msg.angle_min,
@@ -320,12 +332,12 @@ class LocalRefiner(Node):
         """(scan worker) Fuse a scan into the local costmap; re-judge the followed and prepared
         local plans on the fused map (a newly blocked one is refined again, guided by the
         fused J). A scan that waited while another was fused is dropped for the newer one."""
-        pose, scan = item
+        pose, scan, offset = item
         with self._world_lock:
             world = self.world
             if world is None:
                 return
-            world.add_scan(pose, scan)
+            world.add_scan(pose, scan, offset)
             self.counters["scans"] += 1
             if not (self.params.scan_in_plans and world.stale):
                 return

@@ -69,6 +69,10 @@ PARAMETERS = [
                                               "by their predicted motion, so a person crossing "
                                               "a corridor does not block the plan through it)"),
     *shared("scan_offset_x", "scan_offset_y", "scan_offset_yaw"),
+    ParamSpec("robot_base_frame", "base_link", "the robot's base frame (Nav2's name): scans are "
+                                               "placed on it by the tf of their own frame "
+                                               "(/tf_static), the scan_offset_* parameters "
+                                               "where tf does not join them"),
     ParamSpec("collision_monitor", True, "stop / slow down any cmd_vel whose footprint, swept "
                                          "over monitor_time_to_collision, hits a scan point "
                                          "that is not on the static map"),
@@ -139,6 +143,8 @@ class LocalRefinerParams:
                 "monitor_stop_margin", self.monitor_stop_margin,
                 ">= 0 and <= monitor_slowdown_margin")
         require(bool(self.global_frame), "global_frame", self.global_frame, "non-empty")
+        require(bool(self.robot_base_frame), "robot_base_frame", self.robot_base_frame,
+                "non-empty")
 
     def runner_config(self) -> LocalRunnerConfig:
         return LocalRunnerConfig(

@@ -360,3 +360,43 @@ def test_health_is_on_diagnostics(rig):
     assert 0.5 * RATE < float(values["control_rate_hz"]) < 1.5 * RATE
     assert 0 < float(values["control_ms_p50"]) <= float(values["control_ms_p99"])
     assert values["stamps_from_another_clock"] == "0"
+
+
+def test_scans_are_placed_by_the_tf_of_their_frame(rig, monkeypatch):
+    """A scan in `base_scan` is placed on base_link by /tf_static's base_link -> base_scan
+    (here 0.2 m ahead, turned round); where tf does not join them, by scan_offset_*."""
+    from geometry_msgs.msg import TransformStamped
+    from sensor_msgs.msg import LaserScan
+    from tf2_msgs.msg import TFMessage
+
+    from ecahd_ros.qos import TF_STATIC_QOS
+
+    r = rig(use_scan=True, scan_offset_x=0.05)
+    r.send_map()
+    node, submitted = r.node, []
+    monkeypatch.setattr(node._scan_worker, "submit", submitted.append)
+    odom = Odometry()
+    odom.header.frame_id = "map"
+    odom.pose.pose = pose_from_xy_yaw(1.5, 1.5, 0.0)
+    node._on_odom(odom)
+
+    def scan():
+        msg = LaserScan()
+        msg.header.frame_id = "base_scan"
+        msg.angle_min, msg.angle_increment = -math.pi, 2 * math.pi / 8
+        msg.range_min, msg.range_max = 0.1, 8.0
+        msg.ranges = [1.0] * 8
+        node._on_scan(msg)
+
+    scan()
+    assert submitted[-1][2] == pytest.approx((0.05, 0.0, 0.0))  # no tf: the parameters
+    pub = r.probe.create_publisher(TFMessage, "/tf_static", TF_STATIC_QOS)
+    r.spin_until(lambda: pub.get_subscription_count() > 0)
+    t = TransformStamped()
+    t.header.frame_id, t.child_frame_id = "base_link", "base_scan"
+    t.transform.translation.x, t.transform.rotation.z, t.transform.rotation.w = 0.2, 1.0, 0.0
+    pub.publish(TFMessage(transforms=[t]))
+    r.spin_until(lambda: node.tf.received >= 1)
+    scan()
+    x, y, yaw = submitted[-1][2]
+    assert (x, y, abs(yaw)) == pytest.approx((0.2, 0.0, math.pi))
