@@ -20,9 +20,9 @@ Parameters (read-only):
     output (str, ""): bag directory to create; it must not exist. Empty: rosbag2_<date>-<time>
         in the working directory, as ``ros2 bag record`` names it.
     topics (str[], map goal_pose odom plan local_plan cmd_vel collision collision_detail
-        ecahd/timing ecahd/replan local_costmap scan): topics to record, relative names resolved
-        in the node's namespace.
-    latched_topics (str[], [map]): topics to subscribe transient_local.
+        ecahd/timing ecahd/replan local_costmap scan /tf /tf_static): topics to record, relative
+        names resolved in the node's namespace (tf's are absolute, as tf2 publishes them).
+    latched_topics (str[], [map, /tf_static]): topics to subscribe transient_local.
     storage (str, "mcap"): rosbag2 storage plugin, mcap or sqlite3.
     discovery_period (double, 0.5): [s, wall time] how often unadvertised topics are looked up.
 
@@ -54,13 +54,14 @@ from ecahd_ros.spin import spin_node
 BAG_VERSION = 9  # rosbag2 metadata version of Jazzy (offered_qos_profiles as a list)
 STORAGES = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
 DEFAULT_TOPICS = ["map", "goal_pose", "odom", "plan", "local_plan", "cmd_vel", "collision",
-                  "collision_detail", "ecahd/timing", "ecahd/replan", "local_costmap", "scan"]
+                  "collision_detail", "ecahd/timing", "ecahd/replan", "local_costmap", "scan",
+                  "/tf", "/tf_static"]
 
 # one place for every parameter of the node
 PARAMETERS = [
     ParamSpec("output", "", "bag directory to create (must not exist); empty: rosbag2_<date>-<time>"),
     ParamSpec("topics", DEFAULT_TOPICS, "topics to record"),
-    ParamSpec("latched_topics", ["map"], "topics subscribed transient_local (latched, like Nav2's map)"),
+    ParamSpec("latched_topics", ["map", "/tf_static"], "topics subscribed transient_local (latched, like Nav2's map)"),
     ParamSpec("storage", "mcap", f"rosbag2 storage plugin: {' or '.join(STORAGES)}"),
     ParamSpec("discovery_period", 0.5, "[s, wall time] how often unadvertised topics are looked up"),
 ]

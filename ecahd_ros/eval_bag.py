@@ -40,7 +40,9 @@ from ecahd_core.bench.output import write_json
 log = logging.getLogger("ecahd.eval_bag")
 
 TOPICS = ("/map", "/goal_pose", "/odom", "/collision", "/collision_detail", "/cmd_vel",
-          "/ecahd/timing")
+          "/ecahd/timing", "/tf", "/tf_static")
+GLOBAL_FRAME = "map"  # the frame of the map, the goals and the scored poses
+TF_TOLERANCE = 0.3  # [s] a recorded transform this much older than an odometry stamp is used
 COLORS = ("tab:purple", "tab:blue", "tab:orange", "tab:green", "tab:brown", "tab:pink",
           "tab:olive", "tab:cyan")
 
@@ -106,6 +108,48 @@ def _json_records(messages, topic: str, required: tuple[str, ...]) -> list[tuple
     return out
 
 
+def _in_global_frame(odom: list, frames: list, data: dict, path) -> list:
+    """Odometry records (receive time, stamp, x, y, yaw) in ``frames`` placed in GLOBAL_FRAME by
+    the bag's /tf and /tf_static (every transform of the run kept); a record with no transform
+    at its stamp is left out and counted in the log. BagError when none can be placed."""
+    from ecahd_core.bag_io import stamp_seconds
+    from ecahd_core.errors import BagError
+    from ecahd_core.frames import FrameError, Transform, TransformBuffer
+
+    buffer = TransformBuffer(cache_time=1e12)  # the whole recording
+    bad = 0
+    for topic, static in (("/tf_static", True), ("/tf", False)):
+        for _, msg in data.get(topic, []):
+            for t in msg.transforms:
+                tr, q = t.transform.translation, t.transform.rotation
+                try:
+                    buffer.set_transform(t.header.frame_id.lstrip("/"),
+                                         t.child_frame_id.lstrip("/"),
+                                         stamp_seconds(t.header.stamp),
+                                         Transform.checked((tr.x, tr.y, tr.z),
+                                                           (q.x, q.y, q.z, q.w)), static=static)
+                except FrameError:
+                    bad += 1
+    out, missing = [], 0
+    for (t, stamp, x, y, yaw), frame in zip(odom, frames):
+        if frame in ("", GLOBAL_FRAME):
+            out.append((t, stamp, x, y, yaw))
+            continue
+        try:
+            out.append((t, stamp, *buffer.pose_in(GLOBAL_FRAME, frame, stamp, (x, y, yaw),
+                                                  tolerance=TF_TOLERANCE)))
+        except FrameError:
+            missing += 1
+    if bad or missing:
+        log.warning("%s: %d malformed transform(s) skipped, %d odometry pose(s) without a "
+                    "transform to %s left out", path, bad, missing, GLOBAL_FRAME)
+    if not out:
+        raise BagError(f"bag {str(path)!r}: no odometry pose could be placed in "
+                       f"{GLOBAL_FRAME!r} (frames {sorted(set(frames))}; record /tf and "
+                       f"/tf_static with it)")
+    return out
+
+
 def evaluate_bag(path, *, robot: str = "circle", map_name: str = "recorded",
                  goal_radius: float = 0.5, max_steps: int = 800, control_period: float = 0.1,
                  nominal_interval_ms: float | None = None) -> BagEvaluation:
@@ -130,6 +174,10 @@ def evaluate_bag(path, *, robot: str = "circle", map_name: str = "recorded",
     odom = [(t * 1e-9, stamp_seconds(m.header.stamp), m.pose.pose.position.x,
              m.pose.pose.position.y, quaternion_yaw(m.pose.pose.orientation))
             for t, m in data["/odom"]]
+    frames = {m.header.frame_id.lstrip("/") for _, m in data["/odom"]} - {"", GLOBAL_FRAME}
+    if frames:  # a robot's odometry (REP-105): placed in map through the recorded tf
+        odom = _in_global_frame(odom, [m.header.frame_id.lstrip("/") for _, m in data["/odom"]],
+                                data, path)
     collisions = [(t * 1e-9, float(m.data)) for t, m in data.get("/collision", [])]
     timing = []
     for t, record in _json_records(data.get("/ecahd/timing", []), "ecahd/timing", ("ms",)):

@@ -111,18 +111,22 @@ def test_records_every_message_received_and_reads_them_back(ros_context, tmp_pat
 def test_default_topics_cover_what_eval_bag_reads_and_the_typestore_knows_their_types():
     from ecahd_ros.eval_bag import TOPICS as EVAL_TOPICS
 
-    defaults = {"/" + t for t in bag_recorder.DEFAULT_TOPICS}
+    defaults = {t if t.startswith("/") else "/" + t for t in bag_recorder.DEFAULT_TOPICS}
     assert set(EVAL_TOPICS) <= defaults  # a default recording can be scored by eval-bag
     # obstacles and sensing (issues 9, 11): contact kinds, replan requests, the rolling
     # costmap and the scans are recorded by default
     assert {"/collision_detail", "/ecahd/replan", "/local_costmap", "/scan"} <= defaults
+    # a real robot's bag is scored from its tf (odometry in odom): /tf and /tf_static, latched
+    assert {"/tf", "/tf_static"} <= defaults
+    latched = next(p for p in bag_recorder.PARAMETERS if p.name == "latched_topics")
+    assert "/tf_static" in latched.default
     assert len(set(bag_recorder.DEFAULT_TOPICS)) == len(bag_recorder.DEFAULT_TOPICS)
     spec = next(p for p in bag_recorder.PARAMETERS if p.name == "topics")
     assert spec.default == bag_recorder.DEFAULT_TOPICS
     # their types are in the typestore the recorder writes with (else they would be skipped)
     store = get_typestore(bag_recorder.TYPESTORE)
     for msgtype in ("std_msgs/msg/String", "nav_msgs/msg/OccupancyGrid",
-                    "sensor_msgs/msg/LaserScan", "std_msgs/msg/Bool"):
+                    "tf2_msgs/msg/TFMessage", "sensor_msgs/msg/LaserScan", "std_msgs/msg/Bool"):
         assert msgtype in store.fielddefs
     # read_bag lives in the core (no rclpy) and is re-exported here for older imports
     from ecahd_core import bag_io

@@ -24,14 +24,30 @@ def _time(s: float):
     return T["builtin_interfaces/msg/Time"](sec=sec, nanosec=int(round((s - sec) * 1e9)))
 
 
-def _header(s: float):
-    return T["std_msgs/msg/Header"](stamp=_time(s), frame_id="map")
+def _header(s: float, frame: str = "map"):
+    return T["std_msgs/msg/Header"](stamp=_time(s), frame_id=frame)
 
 
-def _pose(x: float, y: float):
+def _pose(x: float, y: float, yaw: float = 0.0):
     return T["geometry_msgs/msg/Pose"](
         position=T["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
-        orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0))
+        orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=float(np.sin(yaw / 2)),
+                                                      w=float(np.cos(yaw / 2))))
+
+
+# a robot's bag (REP-105): odometry in odom, whose origin a localisation puts at map (0.5, 2.0)
+# turned -90 deg (map -> odom on /tf)
+ODOM_IN_MAP = (0.5, 2.0, -np.pi / 2)
+
+
+def _tf(t: float):
+    x, y, yaw = ODOM_IN_MAP
+    vec, quat = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
+    transform = T["geometry_msgs/msg/Transform"](
+        translation=vec(x=x, y=y, z=0.0),
+        rotation=quat(x=0.0, y=0.0, z=float(np.sin(yaw / 2)), w=float(np.cos(yaw / 2))))
+    return T["tf2_msgs/msg/TFMessage"](transforms=[T["geometry_msgs/msg/TransformStamped"](
+        header=_header(t), child_frame_id="odom", transform=transform)])
 
 
 def _map_msg():
@@ -44,13 +60,19 @@ def _map_msg():
                                            data=data.reshape(-1))
 
 
-def _odom(t: float, x: float):
+def _odom(t: float, x: float, frame: str = "map"):
     vec = T["geometry_msgs/msg/Vector3"]
     twist = T["geometry_msgs/msg/Twist"](linear=vec(x=0.0, y=0.0, z=0.0),
                                          angular=vec(x=0.0, y=0.0, z=0.0))
+    pose = (x, 1.0, 0.0)
+    if frame == "odom":  # the map pose seen from odom's origin
+        from ecahd_core.frames import Transform
+
+        pose = (Transform.from_xy_yaw(*ODOM_IN_MAP).inverse()
+                * Transform.from_xy_yaw(*pose)).xy_yaw()
     return T["nav_msgs/msg/Odometry"](
-        header=_header(t), child_frame_id="base_link",
-        pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=_pose(x, 1.0),
+        header=_header(t, frame), child_frame_id="base_link",
+        pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=_pose(*pose),
                                                        covariance=np.zeros(36)),
         twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=twist,
                                                          covariance=np.zeros(36)))
@@ -60,14 +82,15 @@ def _string(text: str):
     return T["std_msgs/msg/String"](data=text)
 
 
-def write_bag(path, *, new_records: bool = True) -> None:
+def write_bag(path, *, new_records: bool = True, odom_frame: str = "map") -> None:
     """Two episodes on the one clock (receive time = sim time [s]):
     0: goal (3.0, 1.0) at 0 s; the robot drives along y = 1 from x = 0.55 at 1 m/s, reaching
        x = 3.0 at 2.45 s; one SD plan; five control ticks; two static-obstacle contacts.
     1: goal (1.0, 1.0) at 3.5 s; the robot stays at x = 3.0 (never within 0.5 m); a
        fallback_astar and an astar plan; three control ticks; a moving-obstacle and a wall
        contact.
-    new_records False: a bag from before collision_detail and the monitor / wall keys."""
+    new_records False: a bag from before collision_detail and the monitor / wall keys.
+    odom_frame "odom": the odometry in odom and map -> odom (ODOM_IN_MAP) on /tf every 0.5 s."""
     msgs = []  # (t [s], topic, msgtype, message)
     msgs.append((0.0, "/map", "nav_msgs/msg/OccupancyGrid", _map_msg()))
     for t, (x, y) in ((0.0, (3.0, 1.0)), (3.5, (1.0, 1.0))):
@@ -78,7 +101,9 @@ def write_bag(path, *, new_records: bool = True) -> None:
     for i in range(251):  # 50 Hz for 5 s
         t = i / 50
         x = min(0.55 + t, 3.0)
-        msgs.append((t, "/odom", "nav_msgs/msg/Odometry", _odom(t, x)))
+        msgs.append((t, "/odom", "nav_msgs/msg/Odometry", _odom(t, x, odom_frame)))
+        if odom_frame != "map" and i % 25 == 0:
+            msgs.append((t, "/tf", "tf2_msgs/msg/TFMessage", _tf(t)))
         hit = next((kind for tc, kind in contacts.items() if abs(tc - t) < 1e-9), None)
         msgs.append((t, "/collision", "std_msgs/msg/Bool", T["std_msgs/msg/Bool"](data=bool(hit))))
         if hit and new_records:
@@ -187,3 +212,36 @@ def test_eval_bag_draws_the_episodes_obstacles(tmp_path, capsys):
     assert main(["eval-bag", str(bag), "--png", str(png), "--scenarios",
                  str(tmp_path / "missing")]) == 2
     assert "not a folder" in capsys.readouterr().err
+
+
+def test_a_robots_bag_with_odometry_in_odom_is_scored_through_its_tf(tmp_path):
+    """The same run recorded as a robot records it (odometry in odom, map -> odom on /tf)
+    scores as its map-frame recording; without the tf it is refused, naming what to record."""
+    from ecahd_core.errors import BagError
+
+    write_bag(tmp_path / "map")
+    write_bag(tmp_path / "odom", odom_frame="odom")
+    want, got = evaluate_bag(tmp_path / "map"), evaluate_bag(tmp_path / "odom")
+    for a, b in zip(want.episodes, got.episodes):
+        np.testing.assert_allclose(b.odom, a.odom, atol=1e-9)  # stamps and map poses
+    for a, b in zip(want.metrics, got.metrics):
+        assert (b.first_reach, b.reached, b.time_to_goal_s, b.contact_steps) == \
+            (a.first_reach, a.reached, a.time_to_goal_s, a.contact_steps)
+    # the same odometry without its tf cannot be placed in map
+    write_bag(tmp_path / "no_tf", odom_frame="odom")
+    import shutil
+
+    from rosbags.rosbag2 import Reader
+
+    with Reader(tmp_path / "no_tf") as reader:
+        keep = [c for c in reader.connections if c.topic != "/tf"]
+        rows = [(c, t, raw) for c, t, raw in reader.messages(connections=keep)]
+    shutil.rmtree(tmp_path / "no_tf")
+    with Writer(tmp_path / "no_tf", version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conns = {}
+        for c, t, raw in rows:
+            if c.topic not in conns:
+                conns[c.topic] = writer.add_connection(c.topic, c.msgtype, typestore=TS)
+            writer.write(conns[c.topic], t, raw)
+    with pytest.raises(BagError, match="record /tf and /tf_static"):
+        evaluate_bag(tmp_path / "no_tf")
