@@ -39,6 +39,14 @@ PARAMETERS = [
                                    "from where the robot started, /tf odom -> base_link, and a "
                                    "localisation stand-in's map -> odom); /tf_static always "
                                    "holds base_link -> scan_frame_id"),
+    ParamSpec("odom_drift", 0.0, "[m per m driven] with an odometry frame: the odometry drifts "
+                                 "(along map y) by this much per metre driven, and the "
+                                 "stand-in localisation's map -> odom corrects it (as AMCL "
+                                 "does); 0 = none"),
+    ParamSpec("odom_jump_at", -1.0, "[s of sim time] with an odometry frame: the localisation "
+                                    "corrects the odometry by odom_jump at once at this time "
+                                    "(an AMCL correction); -1 = never"),
+    ParamSpec("odom_jump", 0.2, "[m] the size of that correction (along map x)"),
     ParamSpec("seed", 0, "seed of the simulator's random generator (scan noise)"),
     ParamSpec("obstacles_file", "", "scenario YAML of obstacles that are not on the map "
                                     "('' = none); dynamic: setting it replaces the obstacles "

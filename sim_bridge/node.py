@@ -223,6 +223,9 @@ class SimBridge(Node):
         # map -> odom there (no drift)
         self._odom_origin = (Transform.identity() if p.odom_frame == MAP_FRAME
                              else Transform.from_xy_yaw(p.start_x, p.start_y, p.start_yaw))
+        self._driven = 0.0  # [m] path length, for odom_drift
+        self._last_xy = (p.start_x, p.start_y)
+        self._jumped = False
         self._tf_static_pub.publish(TFMessage(transforms=[transform_stamped(
             BASE_FRAME, p.scan_frame_id, stamp(self.sim.state.t),
             Transform.from_xy_yaw(*p.scan_offset))]))
@@ -305,6 +308,8 @@ class SimBridge(Node):
         now = stamp(state.t)
         self._clock_pub.publish(ClockMsg(clock=now))
         frame = self.params.odom_frame
+        if frame != MAP_FRAME:
+            self._drift(state)
         base = self._odom_origin.inverse() * Transform.from_xy_yaw(state.x, state.y, state.yaw)
         odom = Odometry()
         odom.header.stamp, odom.header.frame_id = now, frame
@@ -330,6 +335,23 @@ class SimBridge(Node):
         if self._camera_pub is not None and state.t >= self._next_camera_t - 1e-9:
             self._next_camera_t = state.t + 1.0 / self.params.camera_rate_hz
             self._camera_pub.publish(self._image(state))
+
+    def _drift(self, state: SimState) -> None:
+        """The odometry's error (odom_drift, odom_jump at odom_jump_at) as a moving odom origin:
+        map -> odom changes by it, so map -> base_link through tf stays the true pose while the
+        odometry itself wanders, as a real robot's does under a localisation."""
+        p = self.params
+        step = math.dist((state.x, state.y), self._last_xy)
+        self._last_xy = (state.x, state.y)
+        self._driven += step
+        shift = [0.0, 0.0]
+        if p.odom_drift:  # sideways, in the odom frame's y
+            shift[1] += p.odom_drift * step
+        if p.odom_jump_at >= 0 and not self._jumped and state.t >= p.odom_jump_at:
+            self._jumped = True
+            shift[0] += p.odom_jump
+        if shift != [0.0, 0.0]:
+            self._odom_origin = Transform.from_xy_yaw(shift[0], shift[1], 0.0) * self._odom_origin
 
     def _scan(self, state: SimState) -> LaserScan:
         p = self.params
