@@ -33,6 +33,9 @@ import numpy as np
 from ecahd_core.errors import EcahdError
 
 CACHE_TIME = 10.0  # [s] tf2's default buffer length
+# [s] the nodes' transform_tolerance by default (and eval-bag's, the demo's): a transform at most
+# this much older than the odometry it places is used
+TRANSFORM_TOLERANCE = 0.3
 
 
 class FrameError(EcahdError):

@@ -310,6 +310,9 @@ def run_demo(config: DemoConfig) -> DemoResult:
     import rclpy
     from geometry_msgs.msg import PoseStamped, Twist
     from nav_msgs.msg import Odometry
+    from ecahd_core.frames import TRANSFORM_TOLERANCE
+    from ecahd_ros.tf_listener import (TransformUnavailable, TfListener,
+                                          odometry_pose)
     from nav_msgs.msg import Path as PathMsg
     from rclpy.executors import SingleThreadedExecutor
     from std_msgs.msg import String
@@ -347,9 +350,14 @@ def run_demo(config: DemoConfig) -> DemoResult:
         # was published, the latency [ms] once its first plan arrived
         latency = {"goal": None, "sent": 0.0, "ms": None}
 
+        tf = TfListener(demo)  # the robot's odometry is in odom (REP-105): placed in map
+
         def on_odom(msg) -> None:
-            p = msg.pose.pose.position
-            state["odom"] = (p.x, p.y, msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9)
+            try:
+                x, y, _ = odometry_pose(msg, tf.buffer, "map", TRANSFORM_TOLERANCE)
+            except TransformUnavailable:
+                return  # before the first map -> odom
+            state["odom"] = (x, y, msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9)
 
         def on_cmd(msg) -> None:
             state["cmd"] = (msg.linear.x, msg.angular.z)

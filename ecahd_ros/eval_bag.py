@@ -42,7 +42,6 @@ log = logging.getLogger("ecahd.eval_bag")
 TOPICS = ("/map", "/goal_pose", "/odom", "/collision", "/collision_detail", "/cmd_vel",
           "/ecahd/timing", "/tf", "/tf_static")
 GLOBAL_FRAME = "map"  # the frame of the map, the goals and the scored poses
-TF_TOLERANCE = 0.3  # [s] a recorded transform this much older than an odometry stamp is used
 COLORS = ("tab:purple", "tab:blue", "tab:orange", "tab:green", "tab:brown", "tab:pink",
           "tab:olive", "tab:cyan")
 
@@ -114,7 +113,7 @@ def _in_global_frame(odom: list, frames: list, data: dict, path) -> list:
     at its stamp is left out and counted in the log. BagError when none can be placed."""
     from ecahd_core.bag_io import stamp_seconds
     from ecahd_core.errors import BagError
-    from ecahd_core.frames import FrameError, Transform, TransformBuffer
+    from ecahd_core.frames import TRANSFORM_TOLERANCE, FrameError, Transform, TransformBuffer
 
     buffer = TransformBuffer(cache_time=1e12)  # the whole recording
     bad = 0
@@ -137,7 +136,7 @@ def _in_global_frame(odom: list, frames: list, data: dict, path) -> list:
             continue
         try:
             out.append((t, stamp, *buffer.pose_in(GLOBAL_FRAME, frame, stamp, (x, y, yaw),
-                                                  tolerance=TF_TOLERANCE)))
+                                                  tolerance=TRANSFORM_TOLERANCE)))
         except FrameError:
             missing += 1
     if bad or missing:

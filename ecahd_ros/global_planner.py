@@ -81,7 +81,7 @@ from ecahd_ros.global_planner_params import PARAMETERS, GlobalPlannerParams
 from ecahd_ros.params import collision_cost, declare_parameters, make_robot, read_parameters
 from ecahd_ros.qos import MAP_QOS, PLAN_QOS, STREAM_QOS, VIZ_QOS
 from ecahd_ros.spin import spin_node
-from ecahd_ros.tf_listener import TfListener, odometry_pose
+from ecahd_ros.tf_listener import TfListener, placed_odometry
 
 # re-exported: the node module is where users look for its parameters and constants
 __all__ = ["ASTAR_SPACING", "GlobalPlanner", "GlobalPlannerParams", "PARAMETERS", "main"]
@@ -231,9 +231,11 @@ class GlobalPlanner(Node):
 
     def _on_odom(self, msg: Odometry) -> None:
         p = self.params
+        pose = placed_odometry(self, msg, self.tf.buffer, p.global_frame, p.transform_tolerance)
+        if pose is None:
+            return
         try:
-            x, y, _ = validate_pose(odometry_pose(msg, self.tf.buffer, p.global_frame,
-                                                  p.transform_tolerance), "odometry pose")
+            x, y, _ = validate_pose(pose, "odometry pose")
         except PlanningError as exc:
             raise PlanningError(f"odometry ignored: {exc}") from None
         self.pose = np.array([x, y])

@@ -94,7 +94,7 @@ from ecahd_ros.params import (collision_cost, declare_parameters, make_robot, on
                               read_parameters)
 from ecahd_ros.qos import MAP_QOS, PLAN_QOS, SCAN_QOS, STREAM_QOS, VIZ_QOS
 from ecahd_ros.spin import spin_node
-from ecahd_ros.tf_listener import TfListener, odometry_pose
+from ecahd_ros.tf_listener import TfListener, placed_odometry
 
 POSE_HISTORY = 1.0  # [s] of odometry poses kept to place scans by their stamps
 SCAN_POSE_WAIT = 0.2  # [s] a scan waits at most this long for the odometry of its stamp
@@ -265,14 +265,16 @@ class LocalRefiner(Node):
 
     def _on_odom(self, msg: Odometry) -> None:
         p = self.params
-        xyyaw = odometry_pose(msg, self.tf.buffer, p.global_frame, p.transform_tolerance)
+        xyyaw = placed_odometry(self, msg, self.tf.buffer, p.global_frame, p.transform_tolerance)
+        if xyyaw is None:
+            return
         with self._lock:
             try:
                 self.runner.set_pose(xyyaw, self._now())
             except EcahdError as exc:
                 raise EcahdError(f"odometry ignored: {exc}") from None
         # the poses of the last second by their stamps: a scan is placed with the pose at its
-        # own stamp (there is no TF here), not the latest one the robot has moved on from
+        # own stamp, not the latest one the robot has moved on from
         stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
         self._check_stamp("odometry", stamp, self.params.stale_timeout)
         self._poses.add(stamp, self.runner.pose)

@@ -21,8 +21,9 @@ from typing import TypeVar
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
 
-from ecahd_core.maps import DEFAULT_MAP
 from ecahd_core.errors import EcahdError
+from ecahd_core.frames import TRANSFORM_TOLERANCE
+from ecahd_core.maps import DEFAULT_MAP
 
 T = TypeVar("T")
 
@@ -156,7 +157,7 @@ SHARED = {spec.name: spec for spec in [
     ParamSpec("footprint_padding", 0.0, "[m] grows the footprint (Nav2 footprint_padding)"),
     ParamSpec("global_frame", "map", "frame of goals and plans (REP-105's map); odometry in "
                                      "another frame (odom) is placed in it through /tf"),
-    ParamSpec("transform_tolerance", 0.3, "[s] a transform of /tf at most this much older than "
+    ParamSpec("transform_tolerance", TRANSFORM_TOLERANCE, "[s] a transform of /tf at most this much older than "
                                           "the odometry it places is used (Nav2's "
                                           "transform_tolerance)"),
     ParamSpec("clearance_margin", 0.02, "[m] the exact checker judges local plans and "

@@ -34,11 +34,11 @@ PARAMETERS = [
     ParamSpec("scan_noise_std", 0.0, "[m] standard deviation of Gaussian range noise"),
     *shared("scan_offset_x", "scan_offset_y", "scan_offset_yaw"),
     ParamSpec("scan_frame_id", "base_scan", "header.frame_id of the scans"),
-    ParamSpec("odom_frame", "map", "frame of odom: 'map' (the true pose, /tf map -> base_link), "
-                                   "or a robot's odometry frame such as 'odom' (REP-105: odom "
-                                   "from where the robot started, /tf odom -> base_link, and a "
-                                   "localisation stand-in's map -> odom); /tf_static always "
-                                   "holds base_link -> scan_frame_id"),
+    ParamSpec("odom_frame", "odom", "frame of odom: a robot's odometry frame such as 'odom' "
+                                    "(REP-105: odom from where the robot started, /tf odom -> "
+                                    "base_link, and a localisation stand-in's map -> odom), or "
+                                    "'map' (the true pose, /tf map -> base_link); /tf_static "
+                                    "always holds base_link -> scan_frame_id"),
     ParamSpec("odom_drift", 0.0, "[m per m driven] with an odometry frame: the odometry drifts "
                                  "(along map y) by this much per metre driven, and the "
                                  "stand-in localisation's map -> odom corrects it (as AMCL "

@@ -17,6 +17,15 @@ from ecahd_ros.conversions import yaw_from_quaternion
 from ecahd_ros.qos import TF_QOS, TF_STATIC_QOS
 
 
+class TransformUnavailable(EcahdError):
+    """Odometry that tf cannot place in the global frame (yet): the nodes say so every few
+    seconds instead of once per message (it is expected for the first messages after start-up,
+    before the localisation's first transform)."""
+
+
+WAIT_LOG_PERIOD = 5.0  # [s] between two lines about odometry waiting for its transform
+
+
 def stamp_seconds(stamp) -> float:
     """builtin_interfaces/Time -> [s]."""
     return stamp.sec + stamp.nanosec * 1e-9
@@ -70,9 +79,9 @@ def odometry_pose(msg: Odometry, buffer: TransformBuffer, global_frame: str,
         return buffer.pose_in(global_frame, frame, stamp_seconds(msg.header.stamp), xyyaw,
                               tolerance=tolerance)
     except FrameError as exc:
-        raise EcahdError(f"odometry in frame {frame!r} ignored: no transform {global_frame} -> "
-                         f"{frame} at its stamp ({exc}); is the localisation (AMCL, SLAM) "
-                         f"publishing /tf?") from None
+        raise TransformUnavailable(f"odometry in frame {frame!r} ignored: no transform "
+                                   f"{global_frame} -> {frame} at its stamp ({exc}); is the "
+                                   f"localisation (AMCL, SLAM) publishing /tf?") from None
 
 
 def transform_stamped(parent: str, child: str, stamp, transform: Transform) -> TransformStamped:
@@ -85,3 +94,15 @@ def transform_stamped(parent: str, child: str, stamp, transform: Transform) -> T
     (t.transform.rotation.x, t.transform.rotation.y, t.transform.rotation.z,
      t.transform.rotation.w) = (float(v) for v in transform.rotation)
     return t
+
+
+def placed_odometry(node: Node, msg: Odometry, buffer: TransformBuffer, global_frame: str,
+                    tolerance: float) -> tuple[float, float, float] | None:
+    """:func:`odometry_pose`, or None when tf cannot place it yet: then a warning, at most every
+    WAIT_LOG_PERIOD s (after start-up the first odometry often comes before the first
+    transform). Other bad odometry raises, as :func:`odometry_pose`."""
+    try:
+        return odometry_pose(msg, buffer, global_frame, tolerance)
+    except TransformUnavailable as exc:
+        node.get_logger().warning(str(exc), throttle_duration_sec=WAIT_LOG_PERIOD)
+        return None

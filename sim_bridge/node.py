@@ -32,9 +32,9 @@ Parameters (read-only: they configure the simulator at start-up):
 
 Publishes:
     map (nav_msgs/OccupancyGrid; reliable, transient_local, depth 1): the simulated walls.
-    odom (nav_msgs/Odometry; reliable, depth 10): every step, in ``odom_frame``: "map" (the
-        default) gives the true pose in map coordinates; "odom" gives it from where the robot
-        started (REP-105). header.frame_id ``odom_frame``, child_frame_id "base_link", twist in
+    odom (nav_msgs/Odometry; reliable, depth 10): every step, in ``odom_frame``: "odom" (the
+        default, REP-105) gives it from where the robot started; "map" gives the true pose in
+        map coordinates. header.frame_id ``odom_frame``, child_frame_id "base_link", twist in
         base_link.
     /tf (tf2_msgs/TFMessage; reliable, depth 100): every step, ``odom_frame`` -> base_link
         and, with an odometry frame, map -> ``odom_frame`` (the start pose: a localisation

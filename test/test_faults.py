@@ -87,8 +87,9 @@ class ProcessGraph:
         self.out = out
         common = {"map_name": MAP, "robot": "circle", "use_sim_time": True}
         self.params = {
+            # odometry in map (the true pose): a restarted simulator is put where the robot was
             "sim_bridge": {"map": MAP, "robot": "circle", "start_x": WEST[0], "start_y": Y,
-                           "realtime_factor": REALTIME_FACTOR,
+                           "realtime_factor": REALTIME_FACTOR, "odom_frame": "map",
                            "control_timeout": CONTROL_TIMEOUT, "publish_scan": False},
             "global_planner": dict(common),
             # the sim runs at twice real time: control at 20 Hz of sim time, as ecahd demo does
@@ -527,7 +528,7 @@ def test_malformed_input_to_sim_bridge(ros_context, capfd):
     sim = SimBridge(context=ros_context, parameter_overrides=[
         Parameter("map", value=MAP), Parameter("start_x", value=WEST[0]),
         Parameter("start_y", value=Y), Parameter("realtime_factor", value=0.0),
-        Parameter("publish_scan", value=False)])
+        Parameter("publish_scan", value=False), Parameter("odom_frame", value="map")])
     probe = rclpy.create_node("sim_probe", context=ros_context)
     seen, bad = {"odom": None, "clock": 0}, []
 

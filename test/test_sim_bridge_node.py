@@ -36,8 +36,9 @@ def bridge_setup(ros_context):
     created = []
 
     def make(**params):
+        # odometry in map (the true pose) unless a test asks for REP-105's odom
         values = {"map": "maze2d-umaze", "realtime_factor": 0.0, "start_x": START[0],
-                  "start_y": START[1], "start_yaw": START[2], **params}
+                  "start_y": START[1], "start_yaw": START[2], "odom_frame": "map", **params}
         bridge = SimBridge(context=ros_context,
                            parameter_overrides=[Parameter(k, value=v) for k, v in values.items()])
         probe = rclpy.create_node("probe", context=ros_context)
