@@ -65,7 +65,6 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import OccupancyGrid, Odometry, Path
-from rclpy.node import Node
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
@@ -78,6 +77,7 @@ from ecahd_ros.conversions import candidate_markers, msg_to_grid, timing_message
 from ecahd_ros.diagnostics import (DIAGNOSTICS_PERIOD, Latencies, diagnostic_array,
                                    node_status)
 from ecahd_ros.global_planner_params import PARAMETERS, GlobalPlannerParams
+from ecahd_ros.lifecycle import ManagedNode
 from ecahd_ros.params import collision_cost, declare_parameters, make_robot, read_parameters
 from ecahd_ros.qos import MAP_QOS, PLAN_QOS, STREAM_QOS, VIZ_QOS
 from ecahd_ros.spin import spin_node
@@ -87,14 +87,24 @@ from ecahd_ros.tf_listener import TfListener, placed_odometry
 __all__ = ["ASTAR_SPACING", "GlobalPlanner", "GlobalPlannerParams", "PARAMETERS", "main"]
 
 
-class GlobalPlanner(Node):
+class GlobalPlanner(ManagedNode):
     """The node: parameters in, messages in, :class:`~ecahd_core.planning.online.
-    OnlinePlanner` (when and what to plan, the offline planner's SparseStage), messages out."""
+    OnlinePlanner` (when and what to plan, the offline planner's SparseStage), messages out.
+    A lifecycle node (``ecahd_ros.lifecycle``): configured and activated at start-up unless
+    ``autostart`` is false; goals are planned only while active."""
 
     def __init__(self, **kwargs) -> None:
         super().__init__("global_planner", **kwargs)
         declare_parameters(self, PARAMETERS)
-        # configuration errors raise: spin_node exits non-zero with one line
+        self.planning: OnlinePlanner | None = None  # once configured
+        self.pose: np.ndarray | None = None  # (2,) [m] latest valid odometry position
+        self.tf: TfListener | None = None
+        self._entities: list = []  # what configure created, for cleanup
+        # configuration errors raise with autostart: spin_node exits non-zero with one line
+        self.start(self.get_parameter("autostart").value)
+
+    def configure(self) -> None:
+        """Parameters, the model check, the planner, topics and timers (lifecycle configure)."""
         self.params: GlobalPlannerParams = read_parameters(self, PARAMETERS, GlobalPlannerParams)
         p = self.params
         self.footprint = make_robot(p)
@@ -114,35 +124,58 @@ class GlobalPlanner(Node):
         self.planning = OnlinePlanner(p.online_config(), p.runner_config(), self.judged,
                                       clock=self._now,
                                       generator=torch.Generator().manual_seed(p.seed))
-        self.pose: np.ndarray | None = None  # (2,) [m] latest valid odometry position
         self.tf = TfListener(self)  # odometry in odom is placed in global_frame through /tf
-        self._plan_pub = self.create_publisher(Path, "plan", PLAN_QOS)
-        self._cand_pub = self.create_publisher(MarkerArray, "plan_candidates", VIZ_QOS)
-        self._timing_pub = self.create_publisher(String, "ecahd/timing", STREAM_QOS)
-        self._ready_pub = self.create_publisher(String, "ecahd/planner_ready", MAP_QOS)
-        self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", STREAM_QOS)
+        self._entities = list(self.tf.subscriptions)
+        self._plan_pub = self._made(self.create_lifecycle_publisher(Path, "plan", PLAN_QOS))
+        self._cand_pub = self._made(self.create_lifecycle_publisher(
+            MarkerArray, "plan_candidates", VIZ_QOS))
+        self._timing_pub = self._made(self.create_lifecycle_publisher(
+            String, "ecahd/timing", STREAM_QOS))
+        self._ready_pub = self._made(self.create_lifecycle_publisher(
+            String, "ecahd/planner_ready", MAP_QOS))
+        # health also while inactive
+        self._diag_pub = self._made(self.create_publisher(DiagnosticArray, "/diagnostics",
+                                                          STREAM_QOS))
         self._plan_ms = Latencies()  # the last plans' wall times, for /diagnostics
         self._plans = 0
         self._map_time: float | None = None  # [s, node clock] when the map arrived
-        self.create_subscription(OccupancyGrid, "map", guard(self, self._on_map), MAP_QOS)
-        self.create_subscription(PoseStamped, "goal_pose", guard(self, self._on_goal),
-                                 STREAM_QOS)
-        self.create_subscription(Odometry, "odom", guard(self, self._on_odom), STREAM_QOS)
-        self.create_subscription(OccupancyGrid, "local_costmap",
-                                 guard(self, self._on_local_costmap), VIZ_QOS)
-        self.create_subscription(String, "ecahd/replan", guard(self, self._on_replan),
-                                 STREAM_QOS)
+        for msg_type, topic, callback, qos in (
+                (OccupancyGrid, "map", self._on_map, MAP_QOS),
+                (PoseStamped, "goal_pose", self._on_goal, STREAM_QOS),
+                (Odometry, "odom", self._on_odom, STREAM_QOS),
+                (OccupancyGrid, "local_costmap", self._on_local_costmap, VIZ_QOS),
+                (String, "ecahd/replan", self._on_replan, STREAM_QOS)):
+            self._made(self.create_subscription(msg_type, topic, guard(self, callback), qos))
         # a goal coalesced in a burst is planned within one period even without odometry
-        self.create_timer(p.runner_config().min_plan_interval, guard(self, self._on_pending))
-        self.create_timer(DIAGNOSTICS_PERIOD, guard(self, self._publish_diagnostics))
+        self._made(self.create_timer(p.runner_config().min_plan_interval,
+                                     guard(self, self._on_pending)))
+        self._made(self.create_timer(DIAGNOSTICS_PERIOD, guard(self, self._publish_diagnostics)))
         what = f"SD, N={p.num_candidates}, P^g={p.horizon}" if p.method == "sd" else p.method
-        self.get_logger().info(f"global planner ready: {what}, robot {self.footprint.name!r}, "
-                               "waiting for map and odom")
+        self.get_logger().info(f"global planner configured: {what}, robot "
+                               f"{self.footprint.name!r}, waiting for map and odom")
+
+    def _made(self, entity):
+        self._entities.append(entity)
+        return entity
+
+    def release(self) -> None:
+        """Undo :meth:`configure` (lifecycle cleanup and shutdown)."""
+        for entity in self._entities:
+            kind = type(entity).__name__
+            if kind == "LifecyclePublisher":
+                self.destroy_lifecycle_publisher(entity)
+            elif kind == "Publisher":
+                self.destroy_publisher(entity)
+            elif kind == "Subscription":
+                self.destroy_subscription(entity)
+            else:
+                self.destroy_timer(entity)
+        self._entities, self.planning, self.tf, self.pose = [], None, None, None
 
     @property
     def ready(self) -> bool:
         """A map arrived and the planner of ``method`` is built on it."""
-        return self.planning.ready
+        return self.planning is not None and self.planning.ready
 
     @property
     def runner(self):
@@ -150,11 +183,11 @@ class GlobalPlanner(Node):
 
     @property
     def goal(self) -> np.ndarray | None:
-        return self.planning.runner.goal
+        return None if self.planning is None else self.planning.runner.goal
 
     @property
     def waypoints(self) -> np.ndarray | None:
-        return self.planning.runner.waypoints
+        return None if self.planning is None else self.planning.runner.waypoints
 
     def _now(self) -> float:
         return now_seconds(self)
@@ -212,6 +245,9 @@ class GlobalPlanner(Node):
                              num_steps=p.ddim_steps or None)
 
     def _on_goal(self, msg: PoseStamped) -> None:
+        if not self.active:
+            raise PlanningError("goal rejected: global_planner is not active (lifecycle: "
+                                "activate it first)")
         check_frame(msg.header.frame_id, self.params.global_frame, "goal")
         try:
             x, y, _ = validate_pose((msg.pose.position.x, msg.pose.position.y, 0.0), "goal")
@@ -311,7 +347,9 @@ class GlobalPlanner(Node):
             "plans": self._plans, "plan_ms_p50": self._plan_ms.quantile(0.5),
             "plan_ms_p99": self._plan_ms.quantile(0.99), "fallbacks": planning.fallbacks,
             "replan_spacing_m": planning.replan_spacing or "off"}
-        if not planning.ready:
+        if not self.active:
+            level, message = "warn", "inactive (lifecycle): goals are not planned"
+        elif not planning.ready:
             level, message = "warn", "waiting for a map"
         elif goal is not None and self.pose is None:
             level, message = "warn", "a goal waits for odometry"

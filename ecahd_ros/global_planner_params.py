@@ -90,7 +90,7 @@ PARAMETERS = [
     ParamSpec("nice", 0, "nice increment of the thread that plans, so that planning yields "
                          "the CPU to the controller on a busy computer; 0 = unchanged (5 "
                          "changed no closed-loop figure, docs/RESULTS.md)"),
-    *shared("seed", "torch_threads"),
+    *shared("seed", "torch_threads", "autostart"),
 ]
 
 

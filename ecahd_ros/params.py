@@ -169,6 +169,8 @@ SHARED = {spec.name: spec for spec in [
                                    "map: 0.5 on maps over 50 000 cells (a building's speckle "
                                    "is then visible to J), else 0.1 (the paper's tables)"),
     ParamSpec("seed", 0, "seed of the sampler's torch.Generator (a seed reproduces the plans)"),
+    ParamSpec("autostart", True, "configure and activate at start-up; false: wait, unconfigured, "
+                                 "for a lifecycle manager (Nav2's lifecycle_manager)"),
     ParamSpec("scan_offset_x", 0.0, "[m] x of the LiDAR on base_link (the base_link -> "
                                     "base_scan transform; sim_bridge and local_refiner agree)"),
     ParamSpec("scan_offset_y", 0.0, "[m] y of the LiDAR on base_link"),

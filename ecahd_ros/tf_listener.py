@@ -42,10 +42,11 @@ class TfListener:
         self.buffer = buffer or TransformBuffer()
         self.received = 0  # transforms kept
         self.rejected = 0  # transforms skipped
-        node.create_subscription(TFMessage, "/tf", lambda m: self._on_tf(m, False), TF_QOS,
-                                 callback_group=callback_group)
-        node.create_subscription(TFMessage, "/tf_static", lambda m: self._on_tf(m, True),
-                                 TF_STATIC_QOS, callback_group=callback_group)
+        self.subscriptions = [  # the node may destroy them (lifecycle cleanup)
+            node.create_subscription(TFMessage, "/tf", lambda m: self._on_tf(m, False), TF_QOS,
+                                     callback_group=callback_group),
+            node.create_subscription(TFMessage, "/tf_static", lambda m: self._on_tf(m, True),
+                                     TF_STATIC_QOS, callback_group=callback_group)]
 
     def _on_tf(self, msg: TFMessage, static: bool) -> None:
         for t in msg.transforms:

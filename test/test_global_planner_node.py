@@ -582,3 +582,52 @@ def test_odometry_in_odom_is_placed_in_map_through_tf(rig):
     r.send_odom((1.0, -0.5), frame="odom")  # odom's (1, -0.5) is map's (1 + 0.5, 0.5 + 1)
     r.spin_until(lambda: r.planner.pose is not None)
     np.testing.assert_allclose(r.planner.pose, [1.5, 1.5], atol=1e-9)
+
+
+def test_a_lifecycle_manager_configures_and_activates_it(rig, ros_context):
+    """autostart false: the node waits unconfigured; a lifecycle manager's change_state calls
+    (Nav2's protocol) configure it (map and odometry taken, goals not planned while inactive),
+    activate it (goals planned), deactivate it (goals refused) and clean it up."""
+    from lifecycle_msgs.msg import Transition
+    from lifecycle_msgs.srv import ChangeState, GetState
+
+    r = rig(num_candidates=4, autostart=False)
+    change = r.probe.create_client(ChangeState, "/global_planner/change_state")
+    get = r.probe.create_client(GetState, "/global_planner/get_state")
+    r.spin_until(lambda: change.service_is_ready() and get.service_is_ready())
+
+    def call(client, request):
+        future = client.call_async(request)
+        r.spin_until(future.done)
+        return future.result()
+
+    def state() -> str:
+        return call(get, GetState.Request()).current_state.label
+
+    def transition(tid) -> bool:
+        return call(change, ChangeState.Request(transition=Transition(id=tid))).success
+
+    assert state() == "unconfigured" and r.planner.planning is None
+    assert transition(Transition.TRANSITION_CONFIGURE) and state() == "inactive"
+    ready(r)
+    r.send_goal(GOAL)  # inactive: refused, nothing planned
+    r.spin_for(0.3)
+    assert not r.plans and r.planner.goal is None
+    assert transition(Transition.TRANSITION_ACTIVATE) and state() == "active"
+    r.send_goal(GOAL)
+    r.spin_until(lambda: r.plans)
+    assert transition(Transition.TRANSITION_DEACTIVATE) and state() == "inactive"
+    assert transition(Transition.TRANSITION_CLEANUP) and state() == "unconfigured"
+    assert r.planner.planning is None
+
+
+def test_a_configuration_that_fails_under_a_manager_keeps_the_node(rig):
+    """autostart false and an unknown robot: configure answers FAILURE (one error line), the
+    node stays unconfigured and keeps answering its lifecycle services."""
+    from rclpy.lifecycle import TransitionCallbackReturn
+
+    r = rig(num_candidates=4, autostart=False, robot="spaceship")
+    assert r.planner.trigger_configure() == TransitionCallbackReturn.FAILURE
+    assert r.planner.planning is None and not r.planner.active
+    assert r.planner._state_machine.current_state[1] == "unconfigured"
+    assert "spaceship" in (r.planner._configure_error or "")
