@@ -73,7 +73,6 @@ from nav_msgs.msg import OccupancyGrid, Odometry, Path
 from sensor_msgs.msg import LaserScan
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
-from rclpy.node import Node
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
@@ -89,6 +88,7 @@ from ecahd_ros.conversions import (footprint_markers, layout_to_msg, msg_to_grid
                                    timing_message, xy_to_path)
 from ecahd_ros.diagnostics import (DIAGNOSTICS_PERIOD, Latencies, RateMeter, diagnostic_array,
                                    node_status)
+from ecahd_ros.lifecycle import ManagedNode
 from ecahd_ros.local_refiner_params import DYNAMIC, PARAMETERS, LocalRefinerParams
 from ecahd_ros.params import (collision_cost, declare_parameters, make_robot, on_parameter_change,
                               read_parameters)
@@ -101,12 +101,26 @@ SCAN_POSE_WAIT = 0.2  # [s] a scan waits at most this long for the odometry of i
 SCAN_TOLERANCE = 1.0  # [s] a scan older than this is said to be stale (monitor off)
 
 
-class LocalRefiner(Node):
+class LocalRefiner(ManagedNode):
+    """The node: parameters in, plans, odometry and scans in, :class:`~ecahd_core.planning.
+    local.LocalRunner` (segments refined ahead, the bounded control tick), cmd_vel out. A
+    lifecycle node (``ecahd_ros.lifecycle``): configured and activated at start-up unless
+    ``autostart`` is false; it drives only while active and stops the robot when deactivated."""
+
     def __init__(self, **kwargs) -> None:
         super().__init__("local_refiner", **kwargs)
         declare_parameters(self, PARAMETERS, dynamic=DYNAMIC)
-        # configuration errors raise: spin_node exits non-zero with one line
-        self.params: LocalRefinerParams = read_parameters(self, PARAMETERS, LocalRefinerParams)
+        self.params: LocalRefinerParams | None = None  # once configured
+        self.runner: LocalRunner | None = None
+        self._entities: list = []  # what configure created, for cleanup
+        on_parameter_change(self, PARAMETERS, lambda: self.params, self._apply_params)
+        # configuration errors raise with autostart: spin_node exits non-zero with one line
+        self.start(self.get_parameter("autostart").value)
+
+    def configure(self) -> None:
+        """Parameters, the model check, the runner, workers, topics and timers (lifecycle
+        configure)."""
+        self.params = read_parameters(self, PARAMETERS, LocalRefinerParams)
         p = self.params
         self.footprint = make_robot(p)
         self.judged = make_robot(p, margin=p.clearance_margin)  # what plans and commands clear
@@ -148,43 +162,48 @@ class LocalRefiner(Node):
                          "blocked": 0,
                          "rechecks_invalidated": 0, "scans": 0, "scans_unsynced": 0}
         self._cmd_type = TwistStamped if p.enable_stamped_cmd_vel else Twist
-        self._cmd_pub = self.create_publisher(self._cmd_type, "cmd_vel", STREAM_QOS)
-        self._local_pub = self.create_publisher(Path, "local_plan", VIZ_QOS)
-        self._fp_pub = self.create_publisher(MarkerArray, "local_plan_footprints", VIZ_QOS)
-        self._timing_pub = self.create_publisher(String, "ecahd/timing", STREAM_QOS)
-        self._replan_pub = self.create_publisher(String, "ecahd/replan", STREAM_QOS)
-        self._costmap_pub = self.create_publisher(OccupancyGrid, "local_costmap", VIZ_QOS)
-        self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", STREAM_QOS)
+        lifecycle = self.create_lifecycle_publisher
+        self._cmd_pub = self._made(lifecycle(self._cmd_type, "cmd_vel", STREAM_QOS))
+        self._local_pub = self._made(lifecycle(Path, "local_plan", VIZ_QOS))
+        self._fp_pub = self._made(lifecycle(MarkerArray, "local_plan_footprints", VIZ_QOS))
+        self._timing_pub = self._made(lifecycle(String, "ecahd/timing", STREAM_QOS))
+        self._replan_pub = self._made(lifecycle(String, "ecahd/replan", STREAM_QOS))
+        self._costmap_pub = self._made(lifecycle(OccupancyGrid, "local_costmap", VIZ_QOS))
+        # health also while inactive
+        self._diag_pub = self._made(self.create_publisher(DiagnosticArray, "/diagnostics",
+                                                          STREAM_QOS))
         self._control_ms = Latencies()  # the last control ticks' wall times
         self._ticks = RateMeter()  # the control loop's measured rate
         self._map_time: float | None = None  # [s, node clock] when the map's world was built
         self._mismatches_seen = 0  # StampCheck.mismatches at the last /diagnostics
         inputs, maps = MutuallyExclusiveCallbackGroup(), MutuallyExclusiveCallbackGroup()
         control = MutuallyExclusiveCallbackGroup()
-        self.create_subscription(Path, "plan", guard(self, self._on_plan), PLAN_QOS,
-                                 callback_group=inputs)
-        self.create_subscription(Odometry, "odom", guard(self, self._on_odom), STREAM_QOS,
-                                 callback_group=inputs)
+        self._made(self.create_subscription(Path, "plan", guard(self, self._on_plan), PLAN_QOS,
+                                            callback_group=inputs))
+        self._made(self.create_subscription(Odometry, "odom", guard(self, self._on_odom),
+                                            STREAM_QOS, callback_group=inputs))
         self.tf = TfListener(self, callback_group=inputs)
-        self.create_subscription(OccupancyGrid, "map", guard(self, self._on_map), MAP_QOS,
-                                 callback_group=maps)
+        self._entities += self.tf.subscriptions
+        self._made(self.create_subscription(OccupancyGrid, "map", guard(self, self._on_map),
+                                            MAP_QOS, callback_group=maps))
         # steady: the sim steps /clock by 1 / rate_hz (20 ms), so a 20 Hz timer on sim time
         # fires 40 or 60 ms apart; the robot's base wants commands evenly spaced
         clock = Clock(clock_type=ClockType.STEADY_TIME) if p.control_clock == "steady" else None
-        self._timer = self.create_timer(1.0 / p.control_rate, guard(self, self._on_control),
-                                        callback_group=control, clock=clock)
+        self._timer = self._made(self.create_timer(
+            1.0 / p.control_rate, guard(self, self._on_control), callback_group=control,
+            clock=clock))
         if p.use_scan:
             sensing = MutuallyExclusiveCallbackGroup()
-            self.create_subscription(LaserScan, "scan", guard(self, self._on_scan), SCAN_QOS,
-                                     callback_group=sensing)
-            self.create_timer(1.0 / p.local_costmap_rate, guard(self, self._publish_costmap),
-                              callback_group=sensing)
-        on_parameter_change(self, PARAMETERS, lambda: self.params, self._apply_params)
-        self.create_timer(DIAGNOSTICS_PERIOD, guard(self, self._publish_diagnostics),
-                          callback_group=maps)
+            self._made(self.create_subscription(LaserScan, "scan", guard(self, self._on_scan),
+                                                SCAN_QOS, callback_group=sensing))
+            self._made(self.create_timer(1.0 / p.local_costmap_rate,
+                                         guard(self, self._publish_costmap),
+                                         callback_group=sensing))
+        self._made(self.create_timer(DIAGNOSTICS_PERIOD, guard(self, self._publish_diagnostics),
+                                     callback_group=maps))
         self._last_reason = None
         dd = f"DD above c_th={p.c_th:g}" if p.dd_enabled else "DD disabled"
-        self.get_logger().info(f"local refiner ready: {dd}, "
+        self.get_logger().info(f"local refiner configured: {dd}, "
                                f"{p.control_rate:g} Hz, robot {self.footprint.name!r}")
 
     # reading the runner's state (tests, the demo)
@@ -369,7 +388,10 @@ class LocalRefiner(Node):
         self._costmap_pub.publish(layout_to_msg(layout, self.get_clock().now().to_msg()))
 
     def _on_control(self) -> None:
-        """The control tick: the runner's bounded tick, cmd_vel, then what happened."""
+        """The control tick: the runner's bounded tick, cmd_vel, then what happened (while
+        active)."""
+        if not self.active:
+            return
         t0 = time.perf_counter()
         now = self._now()
         with self._lock:
@@ -439,10 +461,38 @@ class LocalRefiner(Node):
             msg.header.frame_id = "base_link"
         self._cmd_pub.publish(msg)
 
+    def _made(self, entity):
+        self._entities.append(entity)
+        return entity
+
+    def on_deactivate(self, state):
+        """Stop the robot (one zero velocity) before the publishers stop."""
+        if self.active and self.runner is not None:
+            self._publish_cmd(0.0, 0.0)
+        return super().on_deactivate(state)
+
+    def release(self) -> None:
+        """Undo :meth:`configure` (lifecycle cleanup and shutdown): workers stopped, topics and
+        timers destroyed."""
+        if self.runner is not None:
+            self._map_worker.close()
+            self._scan_worker.close()
+            self.runner.close()
+        for entity in self._entities:
+            kind = type(entity).__name__
+            if kind == "LifecyclePublisher":
+                self.destroy_lifecycle_publisher(entity)
+            elif kind == "Publisher":
+                self.destroy_publisher(entity)
+            elif kind == "Subscription":
+                self.destroy_subscription(entity)
+            else:
+                self.destroy_timer(entity)
+        self._entities = []
+        self.runner = self.params = self.tf = self.world = self.planner = self.grid = None
+
     def destroy_node(self) -> None:
-        self._map_worker.close()
-        self._scan_worker.close()
-        self.runner.close()
+        self.release()
         super().destroy_node()
 
 
@@ -467,7 +517,9 @@ class LocalRefiner(Node):
             "stale_stamps": self._stamps.stale}
         mismatched = self._stamps.mismatches > self._mismatches_seen
         self._mismatches_seen = self._stamps.mismatches
-        if self.grid is None:
+        if not self.active:
+            level, message = "warn", "inactive (lifecycle): not driving"
+        elif self.grid is None:
             level, message = "warn", "waiting for a map"
         elif mismatched:
             level, message = "warn", ("inputs stamped by another clock (use_sim_time?): see the "

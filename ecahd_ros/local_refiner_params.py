@@ -108,7 +108,7 @@ PARAMETERS = [
                                            "is stopped (the robot does not start across its "
                                            "beat); 0 = off (3 s: the robot waited for "
                                            "crossers, 10 of 20 reached against 14)"),
-    *shared("seed", "torch_threads"),
+    *shared("seed", "torch_threads", "autostart"),
 ]
 CONTROL_CLOCKS = ("steady", "ros")
 DYNAMIC = ("max_v", "max_w", "max_accel", "lookahead", "waypoint_tolerance", "goal_tolerance",

@@ -400,3 +400,30 @@ def test_scans_are_placed_by_the_tf_of_their_frame(rig, monkeypatch):
     scan()
     x, y, yaw = submitted[-1][2]
     assert (x, y, abs(yaw)) == pytest.approx((0.2, 0.0, math.pi))
+
+
+def test_deactivated_it_stops_the_robot_and_stops_commanding(rig):
+    """Lifecycle: driving while active; deactivate sends one zero velocity and then no command
+    at all; activate again drives on; cleanup lets go of the runner."""
+    from rclpy.lifecycle import TransitionCallbackReturn
+
+    r = rig(footprint=SMALL_ROBOT)
+    r.send_map()
+    r.send_odom(1.5, 1.5, 0.0)
+    r.send_plan(PLAN)
+    cmds = r.next_cmds(8)
+    assert cmds[-1].linear.x > 0  # driving
+    assert r.node.trigger_deactivate() == TransitionCallbackReturn.SUCCESS
+    n = len(r.cmds)
+    time_end = time.monotonic() + 0.5
+    while time.monotonic() < time_end:
+        r.executor.spin_once(timeout_sec=0.01)
+    stopped = r.cmds[n - 1:]  # the zero velocity was published before the publisher stopped
+    last = stopped[-1].twist if isinstance(stopped[-1], TwistStamped) else stopped[-1]
+    assert last.linear.x == 0.0 and last.angular.z == 0.0
+    assert len(r.cmds) <= n + 1  # nothing after it while inactive (at 20 Hz: 10 ticks)
+    assert r.node.trigger_activate() == TransitionCallbackReturn.SUCCESS
+    assert r.next_cmds(3)[-1].linear.x >= 0.0  # commanding again
+    assert r.node.trigger_deactivate() == TransitionCallbackReturn.SUCCESS
+    assert r.node.trigger_cleanup() == TransitionCallbackReturn.SUCCESS
+    assert r.node.runner is None and r.node.params is None
