@@ -99,7 +99,6 @@ class GlobalPlanner(ManagedNode):
         self.planning: OnlinePlanner | None = None  # once configured
         self.pose: np.ndarray | None = None  # (2,) [m] latest valid odometry position
         self.tf: TfListener | None = None
-        self._entities: list = []  # what configure created, for cleanup
         # configuration errors raise with autostart: spin_node exits non-zero with one line
         self.start(self.get_parameter("autostart").value)
 
@@ -125,16 +124,17 @@ class GlobalPlanner(ManagedNode):
                                       clock=self._now,
                                       generator=torch.Generator().manual_seed(p.seed))
         self.tf = TfListener(self)  # odometry in odom is placed in global_frame through /tf
-        self._entities = list(self.tf.subscriptions)
-        self._plan_pub = self._made(self.create_lifecycle_publisher(Path, "plan", PLAN_QOS))
-        self._cand_pub = self._made(self.create_lifecycle_publisher(
+        for sub in self.tf.subscriptions:
+            self.made(sub)
+        self._plan_pub = self.made(self.create_lifecycle_publisher(Path, "plan", PLAN_QOS))
+        self._cand_pub = self.made(self.create_lifecycle_publisher(
             MarkerArray, "plan_candidates", VIZ_QOS))
-        self._timing_pub = self._made(self.create_lifecycle_publisher(
+        self._timing_pub = self.made(self.create_lifecycle_publisher(
             String, "ecahd/timing", STREAM_QOS))
-        self._ready_pub = self._made(self.create_lifecycle_publisher(
+        self._ready_pub = self.made(self.create_lifecycle_publisher(
             String, "ecahd/planner_ready", MAP_QOS))
         # health also while inactive
-        self._diag_pub = self._made(self.create_publisher(DiagnosticArray, "/diagnostics",
+        self._diag_pub = self.made(self.create_publisher(DiagnosticArray, "/diagnostics",
                                                           STREAM_QOS))
         self._plan_ms = Latencies()  # the last plans' wall times, for /diagnostics
         self._plans = 0
@@ -145,32 +145,19 @@ class GlobalPlanner(ManagedNode):
                 (Odometry, "odom", self._on_odom, STREAM_QOS),
                 (OccupancyGrid, "local_costmap", self._on_local_costmap, VIZ_QOS),
                 (String, "ecahd/replan", self._on_replan, STREAM_QOS)):
-            self._made(self.create_subscription(msg_type, topic, guard(self, callback), qos))
+            self.made(self.create_subscription(msg_type, topic, guard(self, callback), qos))
         # a goal coalesced in a burst is planned within one period even without odometry
-        self._made(self.create_timer(p.runner_config().min_plan_interval,
+        self.made(self.create_timer(p.runner_config().min_plan_interval,
                                      guard(self, self._on_pending)))
-        self._made(self.create_timer(DIAGNOSTICS_PERIOD, guard(self, self._publish_diagnostics)))
+        self.made(self.create_timer(DIAGNOSTICS_PERIOD, guard(self, self._publish_diagnostics)))
         what = f"SD, N={p.num_candidates}, P^g={p.horizon}" if p.method == "sd" else p.method
         self.get_logger().info(f"global planner configured: {what}, robot "
                                f"{self.footprint.name!r}, waiting for map and odom")
 
-    def _made(self, entity):
-        self._entities.append(entity)
-        return entity
-
     def release(self) -> None:
         """Undo :meth:`configure` (lifecycle cleanup and shutdown)."""
-        for entity in self._entities:
-            kind = type(entity).__name__
-            if kind == "LifecyclePublisher":
-                self.destroy_lifecycle_publisher(entity)
-            elif kind == "Publisher":
-                self.destroy_publisher(entity)
-            elif kind == "Subscription":
-                self.destroy_subscription(entity)
-            else:
-                self.destroy_timer(entity)
-        self._entities, self.planning, self.tf, self.pose = [], None, None, None
+        self.destroy_made()
+        self.planning, self.tf, self.pose = None, None, None
 
     @property
     def ready(self) -> bool:

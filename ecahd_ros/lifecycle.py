@@ -27,6 +27,26 @@ class ManagedNode(LifecycleNode):
         self.active = False
         self._autostarting = False
         self._configure_error: str | None = None
+        self._entities: list = []  # publishers, subscriptions, timers configure made
+
+    def made(self, entity):
+        """Keep ``entity`` (a publisher, subscription or timer) for :meth:`destroy_made`."""
+        self._entities.append(entity)
+        return entity
+
+    def destroy_made(self) -> None:
+        """Destroy what :meth:`made` kept (a release's first step)."""
+        for entity in self._entities:
+            kind = type(entity).__name__
+            if kind == "LifecyclePublisher":
+                self.destroy_lifecycle_publisher(entity)
+            elif kind == "Publisher":
+                self.destroy_publisher(entity)
+            elif kind == "Subscription":
+                self.destroy_subscription(entity)
+            else:
+                self.destroy_timer(entity)
+        self._entities = []
 
     def start(self, autostart: bool) -> None:
         """Configure and activate now (``autostart``), raising EcahdError if configuring

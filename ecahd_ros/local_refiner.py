@@ -112,7 +112,6 @@ class LocalRefiner(ManagedNode):
         declare_parameters(self, PARAMETERS, dynamic=DYNAMIC)
         self.params: LocalRefinerParams | None = None  # once configured
         self.runner: LocalRunner | None = None
-        self._entities: list = []  # what configure created, for cleanup
         on_parameter_change(self, PARAMETERS, lambda: self.params, self._apply_params)
         # configuration errors raise with autostart: spin_node exits non-zero with one line
         self.start(self.get_parameter("autostart").value)
@@ -163,14 +162,14 @@ class LocalRefiner(ManagedNode):
                          "rechecks_invalidated": 0, "scans": 0, "scans_unsynced": 0}
         self._cmd_type = TwistStamped if p.enable_stamped_cmd_vel else Twist
         lifecycle = self.create_lifecycle_publisher
-        self._cmd_pub = self._made(lifecycle(self._cmd_type, "cmd_vel", STREAM_QOS))
-        self._local_pub = self._made(lifecycle(Path, "local_plan", VIZ_QOS))
-        self._fp_pub = self._made(lifecycle(MarkerArray, "local_plan_footprints", VIZ_QOS))
-        self._timing_pub = self._made(lifecycle(String, "ecahd/timing", STREAM_QOS))
-        self._replan_pub = self._made(lifecycle(String, "ecahd/replan", STREAM_QOS))
-        self._costmap_pub = self._made(lifecycle(OccupancyGrid, "local_costmap", VIZ_QOS))
+        self._cmd_pub = self.made(lifecycle(self._cmd_type, "cmd_vel", STREAM_QOS))
+        self._local_pub = self.made(lifecycle(Path, "local_plan", VIZ_QOS))
+        self._fp_pub = self.made(lifecycle(MarkerArray, "local_plan_footprints", VIZ_QOS))
+        self._timing_pub = self.made(lifecycle(String, "ecahd/timing", STREAM_QOS))
+        self._replan_pub = self.made(lifecycle(String, "ecahd/replan", STREAM_QOS))
+        self._costmap_pub = self.made(lifecycle(OccupancyGrid, "local_costmap", VIZ_QOS))
         # health also while inactive
-        self._diag_pub = self._made(self.create_publisher(DiagnosticArray, "/diagnostics",
+        self._diag_pub = self.made(self.create_publisher(DiagnosticArray, "/diagnostics",
                                                           STREAM_QOS))
         self._control_ms = Latencies()  # the last control ticks' wall times
         self._ticks = RateMeter()  # the control loop's measured rate
@@ -178,28 +177,29 @@ class LocalRefiner(ManagedNode):
         self._mismatches_seen = 0  # StampCheck.mismatches at the last /diagnostics
         inputs, maps = MutuallyExclusiveCallbackGroup(), MutuallyExclusiveCallbackGroup()
         control = MutuallyExclusiveCallbackGroup()
-        self._made(self.create_subscription(Path, "plan", guard(self, self._on_plan), PLAN_QOS,
+        self.made(self.create_subscription(Path, "plan", guard(self, self._on_plan), PLAN_QOS,
                                             callback_group=inputs))
-        self._made(self.create_subscription(Odometry, "odom", guard(self, self._on_odom),
+        self.made(self.create_subscription(Odometry, "odom", guard(self, self._on_odom),
                                             STREAM_QOS, callback_group=inputs))
         self.tf = TfListener(self, callback_group=inputs)
-        self._entities += self.tf.subscriptions
-        self._made(self.create_subscription(OccupancyGrid, "map", guard(self, self._on_map),
+        for sub in self.tf.subscriptions:
+            self.made(sub)
+        self.made(self.create_subscription(OccupancyGrid, "map", guard(self, self._on_map),
                                             MAP_QOS, callback_group=maps))
         # steady: the sim steps /clock by 1 / rate_hz (20 ms), so a 20 Hz timer on sim time
         # fires 40 or 60 ms apart; the robot's base wants commands evenly spaced
         clock = Clock(clock_type=ClockType.STEADY_TIME) if p.control_clock == "steady" else None
-        self._timer = self._made(self.create_timer(
+        self._timer = self.made(self.create_timer(
             1.0 / p.control_rate, guard(self, self._on_control), callback_group=control,
             clock=clock))
         if p.use_scan:
             sensing = MutuallyExclusiveCallbackGroup()
-            self._made(self.create_subscription(LaserScan, "scan", guard(self, self._on_scan),
+            self.made(self.create_subscription(LaserScan, "scan", guard(self, self._on_scan),
                                                 SCAN_QOS, callback_group=sensing))
-            self._made(self.create_timer(1.0 / p.local_costmap_rate,
+            self.made(self.create_timer(1.0 / p.local_costmap_rate,
                                          guard(self, self._publish_costmap),
                                          callback_group=sensing))
-        self._made(self.create_timer(DIAGNOSTICS_PERIOD, guard(self, self._publish_diagnostics),
+        self.made(self.create_timer(DIAGNOSTICS_PERIOD, guard(self, self._publish_diagnostics),
                                      callback_group=maps))
         self._last_reason = None
         dd = f"DD above c_th={p.c_th:g}" if p.dd_enabled else "DD disabled"
@@ -461,10 +461,6 @@ class LocalRefiner(ManagedNode):
             msg.header.frame_id = "base_link"
         self._cmd_pub.publish(msg)
 
-    def _made(self, entity):
-        self._entities.append(entity)
-        return entity
-
     def on_deactivate(self, state):
         """Stop the robot (one zero velocity) before the publishers stop."""
         if self.active and self.runner is not None:
@@ -478,17 +474,7 @@ class LocalRefiner(ManagedNode):
             self._map_worker.close()
             self._scan_worker.close()
             self.runner.close()
-        for entity in self._entities:
-            kind = type(entity).__name__
-            if kind == "LifecyclePublisher":
-                self.destroy_lifecycle_publisher(entity)
-            elif kind == "Publisher":
-                self.destroy_publisher(entity)
-            elif kind == "Subscription":
-                self.destroy_subscription(entity)
-            else:
-                self.destroy_timer(entity)
-        self._entities = []
+        self.destroy_made()
         self.runner = self.params = self.tf = self.world = self.planner = self.grid = None
 
     def destroy_node(self) -> None:
