@@ -34,8 +34,10 @@ Subscribes:
     goal_pose (geometry_msgs/PoseStamped; reliable, depth 10): frame must be ``global_frame``;
         finite, on the map and free, else logged and ignored (the current plan stays). A new
         goal pre-empts the current one; a goal before map and odometry is queued.
-    odom (nav_msgs/Odometry; reliable, depth 10): the robot's pose in ``global_frame``;
-        non-finite or absurd poses are logged and ignored.
+    odom (nav_msgs/Odometry; reliable, depth 10): the robot's pose, in ``global_frame`` or in a
+        frame /tf joins to it (REP-105's odom); non-finite or absurd poses are logged and
+        ignored.
+    /tf, /tf_static (tf2_msgs/TFMessage): map -> odom from the localisation.
     local_costmap (nav_msgs/OccupancyGrid; reliable, depth 1): local_refiner's window of the
         obstacles its scans found; re-plans avoid them for ``obstacle_memory`` s.
     ecahd/replan (std_msgs/String; reliable, depth 10): JSON ``{"reason": ...}`` from

@@ -1,6 +1,7 @@
 """local_refiner: ECAHD's local stage as a node (paper Algorithm 1 lines 13-18, Algorithm 2) with a
 pure-pursuit controller that follows the result. A thin shell over
-:class:`ecahd_core.planning.local.LocalRunner` (the online logic, unit-tested without ROS).
+:class:`ecahd_core.planning.local.LocalRunner` (the online logic, unit-tested without ROS); a
+lifecycle node (``ecahd_ros.lifecycle``: it drives only while active).
 
 Each segment of the global plan (the first from the robot's pose when the plan arrived, then
 waypoint to waypoint) gets the straight local plan of P^l points, its collision cost c^l of J
@@ -40,7 +41,12 @@ at run time; the rest are read-only).
 Subscribes:
     plan (nav_msgs/Path; reliable, transient_local, depth 1): the global plan, frame
         ``global_frame``; an empty path stops the robot.
-    odom (nav_msgs/Odometry; reliable, depth 10): pose in ``global_frame``.
+    odom (nav_msgs/Odometry; reliable, depth 10): the robot's pose, in ``global_frame`` or in a
+        frame /tf joins to it (REP-105's odom: ``transform_tolerance``).
+    /tf, /tf_static (tf2_msgs/TFMessage): map -> odom from the localisation, base_link ->
+        the scanner (scans are placed by it; scan_offset_* where tf does not say).
+    scan (sensor_msgs/LaserScan; sensor data QoS; with ``use_scan``): fused into the local
+        costmap and the collision monitor.
     map (nav_msgs/OccupancyGrid; reliable, transient_local, depth 1): builds J's cost map and
         loads the DD model (in its own callback group: control goes on meanwhile); without a
         map the straight local plans are followed unchecked.
