@@ -225,6 +225,18 @@ class TransformBuffer:
                              f"it cannot become {'static' if static else 'dynamic'}")
         link.add(float(stamp), transform, self.cache_time)
 
+    def add_stamped(self, t, *, static: bool = False) -> tuple[str, str]:
+        """Keep a geometry_msgs/TransformStamped ``t`` (an rclpy message or a rosbags record:
+        anything with its fields) -> (parent, child). Frame ids lose a leading '/' (ROS 1's
+        convention, which tf2 strips too); FrameError names a malformed transform."""
+        parent, child = t.header.frame_id.lstrip("/"), t.child_frame_id.lstrip("/")
+        tr, q = t.transform.translation, t.transform.rotation
+        stamp = t.header.stamp.sec + t.header.stamp.nanosec * 1e-9
+        self.set_transform(parent, child, stamp,
+                           Transform.checked((tr.x, tr.y, tr.z), (q.x, q.y, q.z, q.w)),
+                           static=static)
+        return parent, child
+
     def frames(self) -> set[str]:
         """Every frame named so far."""
         return set(self._links) | {link.parent for link in self._links.values()}

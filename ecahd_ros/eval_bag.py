@@ -111,22 +111,16 @@ def _in_global_frame(odom: list, frames: list, data: dict, path) -> list:
     """Odometry records (receive time, stamp, x, y, yaw) in ``frames`` placed in GLOBAL_FRAME by
     the bag's /tf and /tf_static (every transform of the run kept); a record with no transform
     at its stamp is left out and counted in the log. BagError when none can be placed."""
-    from ecahd_core.bag_io import stamp_seconds
     from ecahd_core.errors import BagError
-    from ecahd_core.frames import TRANSFORM_TOLERANCE, FrameError, Transform, TransformBuffer
+    from ecahd_core.frames import TRANSFORM_TOLERANCE, FrameError, TransformBuffer
 
     buffer = TransformBuffer(cache_time=1e12)  # the whole recording
     bad = 0
     for topic, static in (("/tf_static", True), ("/tf", False)):
         for _, msg in data.get(topic, []):
             for t in msg.transforms:
-                tr, q = t.transform.translation, t.transform.rotation
                 try:
-                    buffer.set_transform(t.header.frame_id.lstrip("/"),
-                                         t.child_frame_id.lstrip("/"),
-                                         stamp_seconds(t.header.stamp),
-                                         Transform.checked((tr.x, tr.y, tr.z),
-                                                           (q.x, q.y, q.z, q.w)), static=static)
+                    buffer.add_stamped(t, static=static)
                 except FrameError:
                     bad += 1
     out, missing = [], 0

@@ -11,6 +11,7 @@ from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from tf2_msgs.msg import TFMessage
 
+from ecahd_core.bag_io import stamp_seconds
 from ecahd_core.errors import EcahdError
 from ecahd_core.frames import FrameError, Transform, TransformBuffer
 from ecahd_ros.conversions import yaw_from_quaternion
@@ -24,11 +25,6 @@ class TransformUnavailable(EcahdError):
 
 
 WAIT_LOG_PERIOD = 5.0  # [s] between two lines about odometry waiting for its transform
-
-
-def stamp_seconds(stamp) -> float:
-    """builtin_interfaces/Time -> [s]."""
-    return stamp.sec + stamp.nanosec * 1e-9
 
 
 class TfListener:
@@ -50,19 +46,14 @@ class TfListener:
 
     def _on_tf(self, msg: TFMessage, static: bool) -> None:
         for t in msg.transforms:
-            # tf2 strips a leading '/' from frame ids (ROS 1's convention) with a warning
-            parent, child = t.header.frame_id.lstrip("/"), t.child_frame_id.lstrip("/")
-            tr, q = t.transform.translation, t.transform.rotation
             try:
-                transform = Transform.checked((tr.x, tr.y, tr.z), (q.x, q.y, q.z, q.w))
-                self.buffer.set_transform(parent, child, stamp_seconds(t.header.stamp),
-                                          transform, static=static)
+                self.buffer.add_stamped(t, static=static)
                 self.received += 1
             except FrameError as exc:
                 self.rejected += 1
                 self.node.get_logger().error(
-                    f"{'/tf_static' if static else '/tf'} transform {parent!r} -> {child!r} "
-                    f"skipped: {exc}", throttle_duration_sec=5.0)
+                    f"{'/tf_static' if static else '/tf'} transform {t.header.frame_id!r} -> "
+                    f"{t.child_frame_id!r} skipped: {exc}", throttle_duration_sec=5.0)
 
 
 def odometry_pose(msg: Odometry, buffer: TransformBuffer, global_frame: str,

@@ -451,10 +451,10 @@ class OnlinePlanner:
         """SparseStage.step for ``request`` on what is known now -> (waypoints (P, 2) [m],
         SparsePlan, follow, detail)."""
         now = self.clock()
-        goal = self._snap_goal(start, goal, now)
+        fused = self._fused(now)  # built once a plan: a whole grid on a big map
+        goal = self._snap_goal(start, goal, fused)
         stage = self.stage
         sd = stage.sd
-        fused = self._fused(now)
         if fused is not self.grid:  # J and placement see the remembered obstacles too
             sd = sd.on(cost=self.memory.fused_cost(now, sd.cost) if sd.cost is not None
                        else None,
@@ -485,11 +485,11 @@ class OnlinePlanner:
             detail += ", out of iterations: the last plan followed whole"
         return waypoints, step.sparse, step.follow, detail
 
-    def _snap_goal(self, start: np.ndarray, goal: np.ndarray, now: float) -> np.ndarray:
-        """``goal`` moved at most SNAP_DISTANCE to where the footprint fits (itself if it
-        does or nothing within reach does)."""
-        placed, _ = self._placer(self._fused(now), "snap")(np.stack([start, goal]),
-                                                           last_reach=SNAP_DISTANCE)
+    def _snap_goal(self, start: np.ndarray, goal: np.ndarray, grid) -> np.ndarray:
+        """``goal`` moved at most SNAP_DISTANCE to where the footprint fits on ``grid`` (the
+        static or fused map; itself if it fits or nothing within reach does)."""
+        placed, _ = self._placer(grid, "snap")(np.stack([start, goal]),
+                                               last_reach=SNAP_DISTANCE)
         return placed[-1]
 
     def _fused(self, now: float):
