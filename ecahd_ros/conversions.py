@@ -10,6 +10,7 @@ from nav_msgs.msg import OccupancyGrid, Path
 from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
+from ecahd_core.errors import EcahdError
 from ecahd_core.maps import GridMap, grid_from_occupancy_message, to_occupancy_grid
 
 
@@ -73,9 +74,28 @@ def pose_from_xy_yaw(x: float, y: float, yaw: float) -> Pose:
     return pose
 
 
+def no_heading(pose: Pose) -> None:
+    """Set ``pose``'s orientation to all zeros: "any heading" (see :func:`heading_of`)."""
+    o = pose.orientation
+    o.x = o.y = o.z = o.w = 0.0
+
+
 def yaw_from_quaternion(q) -> float:
     """Heading [rad] of a geometry_msgs/Quaternion (rotation about z)."""
     return float(np.arctan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z)))
+
+
+def heading_of(orientation) -> float | None:
+    """The yaw [rad] of a geometry_msgs/Quaternion; None for all zeros (no heading asked: a
+    goal_pose from a script that sets only the position); EcahdError if not finite."""
+    q = np.array([orientation.x, orientation.y, orientation.z, orientation.w], dtype=np.float64)
+    if not np.all(np.isfinite(q)):
+        raise EcahdError(f"orientation has non-finite values {q.tolist()}")
+    norm = float(np.linalg.norm(q))
+    if norm < 1e-9:
+        return None
+    x, y, z, w = q / norm
+    return float(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
 
 
 def timing_message(stage: str, ms: float, stamp_s: float, **extra) -> String:

@@ -28,12 +28,19 @@ core config it sets: OnlinePlannerConfig, GlobalRunnerConfig, SparseConfig) and 
 A parameter out of range, an unknown robot or an unreadable model ends the node at start-up
 with one error line and exit code 1 (``ecahd_ros.spin``).
 
+Actions (Nav2's, ``ecahd_ros.nav2_actions``; where nav2_msgs is installed or built):
+    navigate_to_pose (nav2_msgs/action/NavigateToPose): a goal planned as on ``goal_pose`` and
+        reached with its heading (``yaw_goal_tolerance``), feedback at 10 Hz, cancel,
+        pre-emption, Nav2's error codes.
+    compute_path_to_pose (nav2_msgs/action/ComputePathToPose): a dense collision-checked path
+        (SD + DD + the exact rule + the safety net; the DD model of ``dd_model``).
 Subscribes:
     map (nav_msgs/OccupancyGrid; reliable, transient_local, depth 1): rebuilds the planner and
         replans when a goal is active.
     goal_pose (geometry_msgs/PoseStamped; reliable, depth 10): frame must be ``global_frame``;
         finite, on the map and free, else logged and ignored (the current plan stays). A new
-        goal pre-empts the current one; a goal before map and odometry is queued.
+        goal pre-empts the current one (a navigate_to_pose goal too); a goal before map and
+        odometry is queued. Its orientation is the heading to reach (all zeros: any).
     odom (nav_msgs/Odometry; reliable, depth 10): the robot's pose, in ``global_frame`` or in a
         frame /tf joins to it (REP-105's odom); non-finite or absurd poses are logged and
         ignored.
@@ -47,7 +54,8 @@ Publishes:
     /diagnostics (diagnostic_msgs/DiagnosticArray; every second): this node's health
         (``ecahd_ros.diagnostics``).
     plan (nav_msgs/Path; reliable, transient_local, depth 1): the selected sparse waypoints
-        (sd) or the whole path (astar, fd), first = robot pose, last = the goal exactly.
+        (sd) or the whole path (astar, fd), first = robot pose, last = the goal exactly, its
+        orientation the goal's heading (all zeros: any); an empty path: the goal was cancelled.
     plan_candidates (visualization_msgs/MarkerArray; reliable, depth 1): sd only: the N
         candidates as line strips (grey), the chosen one highlighted (purple, wider).
     ecahd/timing (std_msgs/String; reliable, depth 10): JSON ``{"stage": "sd" | "astar" | "fd",
@@ -71,15 +79,19 @@ from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
 from ecahd_core.errors import EcahdError, PlanningError
+from ecahd_core.planning.mission import Mission
 from ecahd_core.planning.online import ASTAR_SPACING, OnlinePlanner, PlanOutcome
 from ecahd_core.planning.sparse import SparseDiffusion
 from ecahd_core.validation import validate_pose
 from ecahd_ros.callbacks import check_frame, guard, now_seconds
-from ecahd_ros.conversions import candidate_markers, msg_to_grid, timing_message, xy_to_path
+from ecahd_ros.conversions import (candidate_markers, heading_of, msg_to_grid, no_heading,
+                                   pose_from_xy_yaw, timing_message, xy_to_path)
 from ecahd_ros.diagnostics import (DIAGNOSTICS_PERIOD, Latencies, diagnostic_array,
                                    node_status)
 from ecahd_ros.global_planner_params import PARAMETERS, GlobalPlannerParams
+from ecahd_ros import nav2_actions
 from ecahd_ros.lifecycle import ManagedNode
+from ecahd_ros.nav2_actions import GoalError, check_point, pose_in_frame
 from ecahd_ros.params import collision_cost, declare_parameters, make_robot, read_parameters
 from ecahd_ros.qos import MAP_QOS, PLAN_QOS, STREAM_QOS, VIZ_QOS
 from ecahd_ros.spin import spin_node
@@ -100,7 +112,11 @@ class GlobalPlanner(ManagedNode):
         declare_parameters(self, PARAMETERS)
         self.planning: OnlinePlanner | None = None  # once configured
         self.pose: np.ndarray | None = None  # (2,) [m] latest valid odometry position
+        self.robot_pose: tuple[float, float, float] | None = None  # (x, y, yaw) of it
+        self.goal_yaw: float | None = None  # [rad] the goal's heading (None: any)
         self.tf: TfListener | None = None
+        self._actions: list = []  # the Nav2 action servers, once configured
+        self.mission: Mission | None = None  # the navigate_to_pose goal being driven to
         # configuration errors raise with autostart: spin_node exits non-zero with one line
         self.start(self.get_parameter("autostart").value)
 
@@ -152,14 +168,26 @@ class GlobalPlanner(ManagedNode):
         self.made(self.create_timer(p.runner_config().min_plan_interval,
                                      guard(self, self._on_pending)))
         self.made(self.create_timer(DIAGNOSTICS_PERIOD, guard(self, self._publish_diagnostics)))
+        self._sd: SparseDiffusion | None = None  # the map's SD (compute_path_to_pose's too)
+        self._dense = None  # DensePathPlanner on the map, built on the first path request
+        self.navigate = None  # NavigateToPoseServer
+        if nav2_actions.available():
+            self.navigate = nav2_actions.NavigateToPoseServer(self)
+            self._actions = [self.navigate, nav2_actions.ComputePathServer(self)]
+        else:
+            self.get_logger().warning("nav2_msgs is not installed: navigate_to_pose and "
+                                      "compute_path_to_pose are not served (goal_pose is)")
         what = f"SD, N={p.num_candidates}, P^g={p.horizon}" if p.method == "sd" else p.method
         self.get_logger().info(f"global planner configured: {what}, robot "
                                f"{self.footprint.name!r}, waiting for map and odom")
 
     def release(self) -> None:
         """Undo :meth:`configure` (lifecycle cleanup and shutdown)."""
+        for server in self._actions:
+            server.destroy()
+        self._actions, self.navigate, self.mission = [], None, None
         self.destroy_made()
-        self.planning, self.tf, self.pose = None, None, None
+        self.planning, self.tf, self.pose, self.robot_pose = None, None, None, None
 
     @property
     def ready(self) -> bool:
@@ -178,8 +206,15 @@ class GlobalPlanner(ManagedNode):
     def waypoints(self) -> np.ndarray | None:
         return None if self.planning is None else self.planning.runner.waypoints
 
-    def _now(self) -> float:
+    @property
+    def grid(self):
+        return None if self.planning is None else self.planning.grid
+
+    def now(self) -> float:
+        """The node's clock [s] (sim time with use_sim_time)."""
         return now_seconds(self)
+
+    _now = now
 
     # ------------------------------------------------------------------------- callbacks
     def _on_map(self, msg: OccupancyGrid) -> None:
@@ -200,6 +235,7 @@ class GlobalPlanner(ManagedNode):
         else:
             built["fd"] = self._build_fd(grid)
         had_goal = self.goal is not None
+        self._sd, self._dense = built.get("sd"), None
         self.planning.set_map(grid, **built)
         self._map_time = self._now()
         ms = (time.perf_counter() - t0) * 1e3
@@ -240,11 +276,19 @@ class GlobalPlanner(ManagedNode):
         check_frame(msg.header.frame_id, self.params.global_frame, "goal")
         try:
             x, y, _ = validate_pose((msg.pose.position.x, msg.pose.position.y, 0.0), "goal")
+            yaw = heading_of(msg.pose.orientation)
             xy = np.array([x, y])
             if self.planning.grid is not None:
                 xy = self.planning.grid.validate_point(xy, "goal")
-        except PlanningError as exc:
+        except EcahdError as exc:
             raise PlanningError(f"goal rejected: {exc}") from None
+        if self.navigate is not None:
+            self.navigate.end(0, "pre-empted by a goal on goal_pose")
+        self._set_goal(xy, yaw)
+
+    def _set_goal(self, xy: np.ndarray, yaw: float | None) -> None:
+        """A validated goal (2,) [m] with its heading: planned now, or queued."""
+        self.goal_yaw = yaw
         self.planning.set_goal(xy)
         if not self.planning.ready or self.pose is None:
             missing = " and ".join(n for n, ok in (("map", self.planning.ready),
@@ -260,10 +304,10 @@ class GlobalPlanner(ManagedNode):
         if pose is None:
             return
         try:
-            x, y, _ = validate_pose(pose, "odometry pose")
+            x, y, yaw = validate_pose(pose, "odometry pose")
         except PlanningError as exc:
             raise PlanningError(f"odometry ignored: {exc}") from None
-        self.pose = np.array([x, y])
+        self.pose, self.robot_pose = np.array([x, y]), (x, y, yaw)
         self._step()
 
     def _on_local_costmap(self, msg: OccupancyGrid) -> None:
@@ -293,7 +337,13 @@ class GlobalPlanner(ManagedNode):
         if self.pose is None:
             return
         goal = self.goal
-        outcome = self.planning.step(self.pose)
+        try:
+            outcome = self.planning.step(self.pose)
+        except PlanningError as exc:
+            mission = self.mission
+            if mission is not None:
+                mission.fail(str(exc), nav2_actions.NO_VALID_PATH)
+            raise
         if outcome == "reached":
             self.get_logger().info(f"goal ({goal[0]:.2f}, {goal[1]:.2f}) reached")
         elif isinstance(outcome, PlanOutcome):
@@ -309,7 +359,17 @@ class GlobalPlanner(ManagedNode):
         self._plan_ms.add(out.ms)
         self._plans += 1
         stamp = self.get_clock().now()
-        self._plan_pub.publish(xy_to_path(out.waypoints, frame, stamp.to_msg()))
+        plan = xy_to_path(out.waypoints, frame, stamp.to_msg())
+        # the last pose carries the goal's heading for local_refiner; all zeros: any heading
+        last = plan.poses[-1].pose
+        if self.goal_yaw is None:
+            no_heading(last)
+        else:
+            last.orientation = pose_from_xy_yaw(0.0, 0.0, self.goal_yaw).orientation
+        self._plan_pub.publish(plan)
+        mission = self.mission
+        if mission is not None:
+            mission.planned(out.waypoints)
         if out.sparse is not None:
             self._cand_pub.publish(candidate_markers(out.sparse, frame, stamp.to_msg()))
         self._timing_pub.publish(timing_message(out.method, out.ms, stamp.nanoseconds * 1e-9,
@@ -322,6 +382,60 @@ class GlobalPlanner(ManagedNode):
         else:
             self.get_logger().info(line)
 
+    # --------------------------------------------------------------- Nav2's actions' side
+    def goal_pose_in(self, msg: PoseStamped, *, tf_error: int | None = None,
+                     what: str = "goal") -> tuple[float, float, float | None]:
+        """A PoseStamped's (x, y, yaw or None) in ``global_frame`` (GoalError naming the
+        problem, ``tf_error`` when tf cannot join its frame)."""
+        p = self.params
+        return pose_in_frame(msg, p.global_frame, self.tf.buffer, p.transform_tolerance, what,
+                             nav2_actions.TF_ERROR if tf_error is None else tf_error)
+
+    def start_mission(self, x: float, y: float, yaw: float | None) -> Mission:
+        """navigate_to_pose's goal: checked on the map (GoalError with Nav2's code), planned
+        as a goal_pose is, followed by a Mission."""
+        xy = np.array([x, y])
+        if self.grid is not None:
+            xy = check_point(self.grid, xy, "goal", nav2_actions.GOAL_OUTSIDE_MAP,
+                             nav2_actions.GOAL_OCCUPIED)
+        self.mission = Mission(xy, yaw, self.now(), self.params.mission_config())
+        try:
+            self._set_goal(xy, yaw)  # the plans made now count for the mission
+        except PlanningError as exc:
+            self.mission = None
+            self.planning.cancel()
+            raise GoalError(nav2_actions.NO_VALID_PATH, str(exc)) from None
+        return self.mission
+
+    def stop_goal(self) -> None:
+        """Drop the goal and stop the robot (an empty plan: local_refiner stops)."""
+        if self.planning is not None:
+            self.planning.cancel()
+        self.goal_yaw = None
+        self._plan_pub.publish(xy_to_path(np.zeros((0, 2)), self.params.global_frame,
+                                          self.get_clock().now().to_msg()))
+
+    def dense_path(self, start: np.ndarray, goal: np.ndarray):
+        """compute_path_to_pose's path from ``start`` to ``goal`` (2,) [m]: a DensePath."""
+        import torch
+
+        from ecahd_core.planning.dense_path import DensePath, DensePathPlanner
+
+        p = self.params
+        if p.method == "astar":
+            t0 = time.perf_counter()
+            path = self.planning.astar.plan(start, goal)
+            return DensePath(path=path, safe=True, rule="astar", reason="",
+                             ms=(time.perf_counter() - t0) * 1e3)
+        if p.method != "sd" or self._sd is None:
+            raise GoalError(nav2_actions.PATH_UNKNOWN,
+                            f"compute_path_to_pose serves methods sd and astar, not "
+                            f"{p.method!r}")
+        if self._dense is None:  # the DD model and the net, once per map
+            self._dense = DensePathPlanner.for_map(self.grid, self.footprint, self._sd,
+                                                   dd_model=p.dd_model or None)
+        return self._dense.plan(start, goal,
+                                generator=torch.Generator().manual_seed(p.seed))
 
     def _publish_diagnostics(self) -> None:
         """This node's health on /diagnostics: planner and map, goal, plan latency, fallbacks."""

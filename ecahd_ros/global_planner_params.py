@@ -5,6 +5,7 @@ rendered from this list (``ecahd config``)."""
 from __future__ import annotations
 
 from ecahd_core.planning.horizon import REPLAN_POLICIES
+from ecahd_core.planning.mission import MissionConfig
 from ecahd_core.planning.online import METHODS, GlobalRunnerConfig, OnlinePlannerConfig
 from ecahd_core.planning.sparse import SELECTION_RULES, SparseConfig
 from ecahd_core.threads import PRECISION_CHOICES
@@ -14,6 +15,7 @@ from ecahd_ros.params import (ParamSpec, parameters_dataclass, require, require_
 
 # the defaults live in the core configs the parameters set (one home for each)
 _ONLINE, _RUNNER, _SPARSE = OnlinePlannerConfig(), GlobalRunnerConfig(), SparseConfig()
+_MISSION = MissionConfig()
 
 PARAMETERS = [
     ParamSpec("method", _ONLINE.method, f"global planner: {list(METHODS)} (sd: ECAHD, replanned at each "
@@ -90,6 +92,10 @@ PARAMETERS = [
     ParamSpec("nice", 0, "nice increment of the thread that plans, so that planning yields "
                          "the CPU to the controller on a busy computer; 0 = unchanged (5 "
                          "changed no closed-loop figure, docs/RESULTS.md)"),
+    *shared("dd_model", "yaw_goal_tolerance"),
+    ParamSpec("heading_timeout", _MISSION.align_timeout, "[s] navigate_to_pose: a goal whose position is reached but "
+                                 "not its heading within this fails (turning in place "
+                                 "blocked)"),
     *shared("seed", "torch_threads", "autostart"),
 ]
 
@@ -100,7 +106,7 @@ class GlobalPlannerParams:
 
     def __post_init__(self) -> None:
         require_positive(self, "num_candidates", "epsilon", "waypoint_tolerance",
-                         "torch_threads")
+                         "yaw_goal_tolerance", "heading_timeout", "torch_threads")
         require(0 <= self.nice <= 19, "nice", self.nice, "in 0..19")
         require(self.inference_precision in PRECISION_CHOICES, "inference_precision",
                 self.inference_precision, f"one of {list(PRECISION_CHOICES)}")
@@ -137,6 +143,13 @@ class GlobalPlannerParams:
                                    leg_repair=self.leg_repair, repair_reach=self.repair_reach,
                                    replan_spacing=self.replan_spacing, subgoals=self.subgoals,
                                    settle=self.settle, obstacle_memory=self.obstacle_memory)
+
+    def mission_config(self) -> MissionConfig:
+        """When a navigate_to_pose goal is reached: the position within waypoint_tolerance
+        (the planner's own "reached"), the heading within yaw_goal_tolerance."""
+        return MissionConfig(xy_tolerance=self.waypoint_tolerance,
+                             yaw_tolerance=self.yaw_goal_tolerance,
+                             align_timeout=self.heading_timeout)
 
     def sparse_config(self) -> SparseConfig:
         return SparseConfig(num_candidates=self.num_candidates, horizon=self.horizon,

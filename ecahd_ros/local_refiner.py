@@ -27,8 +27,10 @@ Controller (every 1 / control_rate s of ``control_clock``: steady wall time by d
 Nav2's controller_server; the tick reads the node's clock, sim time with use_sim_time): pure
 pursuit within max_v, max_w and max_accel. Zero velocity with no plan, odometry older than
 ``stale_timeout`` (or a plan older than ``plan_timeout`` when that is > 0), and once the goal
-(the plan's last point) is within ``goal_tolerance``; the plan is then dropped until a new one
-arrives.
+(the plan's last point) is within ``goal_tolerance`` and, when the plan's last pose has an
+orientation (the goal's heading; all zeros: any), the robot has turned in place to it within
+``yaw_goal_tolerance`` (not where turning would sweep the footprint into a wall: then a warning);
+the plan is then dropped until a new one arrives.
 
 Every message is validated before it changes state: a plan in another frame, with non-finite or
 off-map poses or more than 100 000 poses, NaN odometry, a malformed map: one error line, the
@@ -40,7 +42,8 @@ at run time; the rest are read-only).
 
 Subscribes:
     plan (nav_msgs/Path; reliable, transient_local, depth 1): the global plan, frame
-        ``global_frame``; an empty path stops the robot.
+        ``global_frame``; an empty path stops the robot; the last pose's orientation is the
+        goal's heading (all zeros: any).
     odom (nav_msgs/Odometry; reliable, depth 10): the robot's pose, in ``global_frame`` or in a
         frame /tf joins to it (REP-105's odom: ``transform_tolerance``).
     /tf, /tf_static (tf2_msgs/TFMessage): map -> odom from the localisation, base_link ->
@@ -90,8 +93,8 @@ from ecahd_core.sensing import PoseHistory
 from ecahd_core.worker import LatestWorker
 from ecahd_ros.callbacks import check_frame, guard, now_seconds
 from ecahd_ros.clock_check import StampCheck
-from ecahd_ros.conversions import (footprint_markers, layout_to_msg, msg_to_grid, path_to_xy,
-                                   timing_message, xy_to_path)
+from ecahd_ros.conversions import (footprint_markers, heading_of, layout_to_msg, msg_to_grid,
+                                   path_to_xy, timing_message, xy_to_path)
 from ecahd_ros.diagnostics import (DIAGNOSTICS_PERIOD, Latencies, RateMeter, diagnostic_array,
                                    node_status)
 from ecahd_ros.lifecycle import ManagedNode
@@ -270,6 +273,7 @@ class LocalRefiner(ManagedNode):
         with self._lock, self._world_lock:
             self.grid, self.planner, self.refiner, self.world = grid, planner, refiner, world
             self.runner.refine = refiner
+            self.runner.can_turn = refiner.can_turn  # turning in place to the goal's heading
             self.runner.reset_costs()  # the current plan's segments are refined on this map
         self.get_logger().info(f"map {grid.name!r} received; "
                                f"{'DD model and ' if p.dd_enabled else ''}cost J ready, "
@@ -279,12 +283,16 @@ class LocalRefiner(ManagedNode):
         p = self.params
         check_frame(msg.header.frame_id, p.global_frame, "plan")
         xy = path_to_xy(msg)
+        try:  # the last pose's orientation: the goal's heading (all zeros: any)
+            yaw = heading_of(msg.poses[-1].pose.orientation) if msg.poses else None
+        except EcahdError as exc:
+            raise EcahdError(f"plan ignored: its last pose's {exc}") from None
         with self._lock:
             if len(xy) == 0:
                 self.get_logger().info("empty plan: stopping")
             bounds = self.grid.bounds if self.grid is not None else None
             try:
-                self.runner.set_plan(xy, self._now(), bounds)
+                self.runner.set_plan(xy, self._now(), bounds, goal_yaw=yaw)
             except EcahdError as exc:
                 raise EcahdError(f"plan ignored: {exc}") from None
 
@@ -438,6 +446,11 @@ class LocalRefiner(ManagedNode):
             return
         if kind == "goal_reached":
             self.get_logger().info("goal reached")
+            return
+        if kind == "heading_blocked":
+            self.get_logger().warning(
+                f"at the goal, {math.degrees(what):+.0f} deg from its heading: turning in place "
+                "here would hit a wall; the goal ends at its position")
             return
         result: SegmentResult = what
         if kind == "blocked":

@@ -15,7 +15,7 @@ from ecahd_ros.params import (ParamSpec, parameters_dataclass, require, require_
 _MONITOR = CollisionMonitorConfig()
 
 PARAMETERS = [
-    ParamSpec("dd_model", "", "DD checkpoint path; '' = the shipped model for map_name"),
+    *shared("dd_model"),
     *shared("map_name", "robot", "footprint", "footprint_padding", "global_frame",
             "transform_tolerance", "clearance_margin", "cost_margin"),
     ParamSpec("c_th", DenseConfig().c_th, "DD refines a local plan whose collision cost c^l "
@@ -108,11 +108,11 @@ PARAMETERS = [
                                            "is stopped (the robot does not start across its "
                                            "beat); 0 = off (3 s: the robot waited for "
                                            "crossers, 10 of 20 reached against 14)"),
-    *shared("seed", "torch_threads", "autostart"),
+    *shared("yaw_goal_tolerance", "seed", "torch_threads", "autostart"),
 ]
 CONTROL_CLOCKS = ("steady", "ros")
 DYNAMIC = ("max_v", "max_w", "max_accel", "lookahead", "waypoint_tolerance", "goal_tolerance",
-           "stale_timeout", "plan_timeout")
+           "yaw_goal_tolerance", "stale_timeout", "plan_timeout")
 
 
 @parameters_dataclass(PARAMETERS)
@@ -121,8 +121,8 @@ class LocalRefinerParams:
 
     def __post_init__(self) -> None:
         require_positive(self, "control_rate", "max_v", "max_w", "max_accel", "lookahead",
-                         "waypoint_tolerance", "goal_tolerance", "stale_timeout",
-                         "torch_threads")
+                         "waypoint_tolerance", "goal_tolerance", "yaw_goal_tolerance",
+                         "stale_timeout", "torch_threads")
         require_cost_margin(self)
         require_non_negative(self, "c_th", "footprint_padding", "plan_timeout", "seed",
                              "transform_tolerance",
@@ -151,7 +151,7 @@ class LocalRefinerParams:
             control_period=1.0 / self.control_rate, max_v=self.max_v, max_w=self.max_w,
             max_accel=self.max_accel, lookahead=self.lookahead,
             waypoint_tolerance=self.waypoint_tolerance, goal_tolerance=self.goal_tolerance,
-            stale_timeout=self.stale_timeout, plan_timeout=self.plan_timeout,
+            yaw_goal_tolerance=self.yaw_goal_tolerance, stale_timeout=self.stale_timeout, plan_timeout=self.plan_timeout,
             prepare_ahead=self.prepare_ahead)
 
     def local_costmap_config(self):

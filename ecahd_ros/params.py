@@ -168,7 +168,13 @@ SHARED = {spec.name: spec for spec in [
                                    "polishing, SD's collision-aware selection); -1 = by the "
                                    "map: 0.5 on maps over 50 000 cells (a building's speckle "
                                    "is then visible to J), else 0.1 (the paper's tables)"),
+    ParamSpec("dd_model", "", "DD checkpoint path; '' = the shipped model for map_name "
+                              "(global_planner: compute_path_to_pose's dense path)"),
     ParamSpec("seed", 0, "seed of the sampler's torch.Generator (a seed reproduces the plans)"),
+    ParamSpec("yaw_goal_tolerance", 0.25, "[rad] a goal with a heading (navigate_to_pose, or "
+                                          "goal_pose with a non-zero orientation) is reached "
+                                          "turned to within this (Nav2's goal checker); "
+                                          "local_refiner turns in place at the goal"),
     ParamSpec("autostart", True, "configure and activate at start-up; false: wait, unconfigured, "
                                  "for a lifecycle manager (Nav2's lifecycle_manager)"),
     ParamSpec("scan_offset_x", 0.0, "[m] x of the LiDAR on base_link (the base_link -> "

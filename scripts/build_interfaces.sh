@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
-# Build the interface packages ROS 2 Jazzy has but PyPI does not (interfaces/: tf2_msgs) into a
+# Build the interface packages ROS 2 Jazzy has but PyPI does not (interfaces/: tf2_msgs, nav2_msgs' NavigateToPose and ComputePathToPose) into a
 # virtual environment, so rclpy can use them: `bash scripts/build_interfaces.sh [VENV]` (default:
 # the repository's .venv; scripts/venv.sh calls it). Needs the `interfaces` extra installed
-# (the rosidl generators, ament_cmake, colcon), cmake and a C/C++ compiler. Takes ~10 s.
+# (the rosidl generators, ament_cmake, colcon), cmake and a C/C++ compiler. Takes ~30 s.
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 VENV="${1:-$ROOT/.venv}"
@@ -12,7 +12,7 @@ SITE="$("$PY" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"
 # point them at this interpreter's and numpy's (idempotent).
 PYINC="$("$PY" -c 'import sysconfig; print(sysconfig.get_paths()["include"])')"
 NPINC="$("$PY" -c 'import numpy; print(numpy.get_include())')"
-grep -rlE '/opt/python/cp[0-9]+-cp[0-9]+/' --include='*.cmake' "$VENV/share" 2>/dev/null \
+{ grep -rlE '/opt/python/cp[0-9]+-cp[0-9]+/' --include='*.cmake' "$VENV/share" 2>/dev/null || true; } \
     | while read -r f; do
         sed -i -E "s#/opt/python/cp[0-9]+-cp[0-9]+/lib/python[0-9.]+/site-packages/numpy/(_core|core)/include#$NPINC#g; s#/opt/python/cp[0-9]+-cp[0-9]+/include/python[0-9.]+#$PYINC#g" "$f"
     done
@@ -29,5 +29,6 @@ for pkg in "$ROOT"/interfaces/*/; do
 done
 # the built Python packages land in the venv's site-packages, their libraries in its lib/
 # (the ROS wheels' bootstrapper puts that on the loader path)
-"$PY" -c 'import tf2_msgs.msg' || { echo "[ecahd] tf2_msgs built but does not import" >&2; exit 1; }
+"$PY" -c 'import tf2_msgs.msg, nav2_msgs.action' \
+    || { echo "[ecahd] the interfaces built but do not import" >&2; exit 1; }
 echo "[ecahd] interfaces ready in $SITE"

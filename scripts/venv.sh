@@ -9,7 +9,7 @@ if [ ! -x "$VENV/bin/python" ]; then
 fi
 STAMP="$VENV/.ecahd-installed"
 WANT="$(cat "$ROOT/setup.py" "$ROOT/setup.cfg" "$ROOT"/interfaces/*/package.xml "$ROOT"/interfaces/*/CMakeLists.txt \
-    "$ROOT"/interfaces/*/msg/* "$ROOT/scripts/build_interfaces.sh" | sha256sum | cut -d' ' -f1)"
+    "$ROOT"/interfaces/*/msg/* "$ROOT"/interfaces/*/action/* "$ROOT/scripts/build_interfaces.sh" | sha256sum | cut -d' ' -f1)"
 if [ ! -f "$STAMP" ] || [ "$(cat "$STAMP")" != "$WANT" ]; then
     echo "[ecahd] installing ecahd_ros and its dependencies into $VENV"
     "$VENV/bin/python" -m pip install --quiet --upgrade pip

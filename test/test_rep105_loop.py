@@ -56,7 +56,7 @@ class Loop:
         goal = PoseStamped()
         goal.header.frame_id = "map"
         goal.pose.position.x, goal.pose.position.y = GOAL
-        goal.pose.orientation.w = 1.0
+        # orientation all zeros: any heading
         self.spin_until(lambda: self.goal_pub.get_subscription_count() > 0,
                         "the planner subscribed")
         self.goal_pub.publish(goal)
@@ -124,4 +124,41 @@ def test_tf_lost_mid_run_stops_the_robot_until_it_returns(ros_context):
         assert loop.state.contact_count == 0
     finally:
         sim._tf_pub.publish = real_publish
+        loop.close()
+
+
+def test_navigate_to_pose_drives_there_and_turns_to_the_heading(ros_context):
+    """A Nav2 client's NavigateToPose goal in map with a heading: the robot drives there on
+    odometry in odom, turns in place, and the goal SUCCEEDS facing the heading, no wall
+    touched; feedback came while it drove."""
+    from action_msgs.msg import GoalStatus
+    from rclpy.action import ActionClient
+
+    nav2 = pytest.importorskip("nav2_msgs.action")
+    from ecahd_ros.conversions import pose_from_xy_yaw
+
+    loop = Loop(ros_context)
+    client = ActionClient(loop.probe, nav2.NavigateToPose, "navigate_to_pose")
+    feedback = []
+    try:
+        loop.spin_until(lambda: loop.planner.ready and loop.planner.pose is not None
+                        and client.server_is_ready(), "planner and its action server ready")
+        goal = nav2.NavigateToPose.Goal()
+        goal.pose.header.frame_id = "map"
+        heading = -math.pi / 2
+        goal.pose.pose = pose_from_xy_yaw(GOAL[0], GOAL[1], heading)
+        sent = client.send_goal_async(goal, feedback_callback=feedback.append)
+        loop.spin_until(sent.done, "the goal accepted")
+        result = sent.result().get_result_async()
+        loop.spin_until(result.done, "the goal's result")
+        assert result.result().status == GoalStatus.STATUS_SUCCEEDED
+        state = loop.state
+        assert math.dist((state.x, state.y), GOAL) < 0.3
+        error = (state.yaw - heading + math.pi) % (2 * math.pi) - math.pi
+        assert abs(error) <= loop.planner.params.yaw_goal_tolerance + 0.05
+        assert state.contact_count == 0
+        remaining = [f.feedback.distance_remaining for f in feedback]
+        assert len(remaining) > 10 and remaining[0] > 3.0 and min(remaining) < 0.5
+    finally:
+        client.destroy()
         loop.close()

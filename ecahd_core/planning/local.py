@@ -30,6 +30,8 @@ from ecahd_core.errors import EcahdError
 from ecahd_core.validation import simplify, validate_plan, validate_pose
 
 WAITING_END_DISTANCE = 0.05  # [m] at the end of the local plan with nothing next: stop
+ALIGN_GAIN = 1.5  # [1/s] turning in place to the goal's heading: w = gain * heading error
+MIN_ALIGN_W = 0.2  # [rad/s] ... but at least this fast (within max_w)
 
 
 @dataclass(frozen=True)
@@ -66,13 +68,15 @@ class LocalRunnerConfig:
     lookahead: float = 0.25  # [m]
     waypoint_tolerance: float = 0.3  # [m]
     goal_tolerance: float = 0.25  # [m]
+    yaw_goal_tolerance: float = 0.25  # [rad] a goal with a heading: turned to within this
     stale_timeout: float = 1.0  # [s]
     plan_timeout: float = 0.0  # [s], 0 = never
     prepare_ahead: int = 2  # segments refined ahead of the one being followed
 
     def __post_init__(self) -> None:
         for name in ("control_period", "max_v", "max_w", "max_accel", "lookahead",
-                     "waypoint_tolerance", "goal_tolerance", "stale_timeout"):
+                     "waypoint_tolerance", "goal_tolerance", "yaw_goal_tolerance",
+                     "stale_timeout"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise EcahdError(f"{name} must be a finite number > 0, got {value!r}")
@@ -86,7 +90,9 @@ class LocalRunnerConfig:
 class Command:
     """One control tick's output: v [m/s], w [rad/s] and why (``reason``: "follow",
     "no_odom", "stale_odom", "no_plan", "plan_timeout", "goal_reached", "waiting" for a
-    segment still being refined, "blocked" by a segment the exact checker finds in collision)."""
+    segment still being refined, "blocked" by a segment the exact checker finds in collision,
+    "aligning": turning in place to the goal's heading, "heading_blocked": turning in place
+    would hit something, so the goal ends at its position)."""
 
     v: float
     w: float
@@ -150,6 +156,9 @@ class LocalRunner:
         self.events: list[tuple[str, object]] = []  # ("segment", SegmentResult), ("blocked",
         #   SegmentResult), ("goal_reached", None), ("error", str): drained by the caller
         self.dd_calls = 0
+        self.goal_yaw: float | None = None  # [rad] the plan's goal heading (None: any)
+        # (x, y, yaw) -> the robot may turn in place there (None: always)
+        self.can_turn: Callable[[tuple[float, float, float]], bool] | None = None
 
     # ----------------------------------------------------------------------------- inputs
     def set_pose(self, pose, now: float) -> None:
@@ -158,9 +167,13 @@ class LocalRunner:
         self.pose_time = now
 
     def set_plan(self, waypoints, now: float,
-                 bounds: tuple[float, float, float, float] | None = None) -> None:
+                 bounds: tuple[float, float, float, float] | None = None,
+                 goal_yaw: float | None = None) -> None:
         """A new global plan (P, 2) [m]: validated (see :func:`validate_plan`), simplified, its
-        first ``prepare_ahead`` + 1 segments submitted for refinement. An empty plan stops."""
+        first ``prepare_ahead`` + 1 segments submitted for refinement. An empty plan stops.
+        ``goal_yaw`` [rad]: at the goal the robot turns in place to this heading (None: any)."""
+        if goal_yaw is not None and not math.isfinite(goal_yaw):
+            raise EcahdError(f"the goal's heading is not finite: {goal_yaw!r}")
         xy = np.asarray(waypoints, dtype=np.float64).reshape(-1, 2)
         if len(xy) == 0:
             self.clear_plan()
@@ -172,6 +185,7 @@ class LocalRunner:
             job.cancel()
         self.generation += 1
         self.waypoints, self.plan_time, self._jobs, self._reported = xy, now, {}, set()
+        self.goal_yaw = goal_yaw
         self._starts = {1: np.array(self.pose[:2]) if self.pose is not None else xy[0]}
         self._target = 1  # the next segment to take over (the followed one stays meanwhile)
         self._submit_ahead()
@@ -203,6 +217,9 @@ class LocalRunner:
         xy = np.array(self.pose[:2])
         goal_distance = float(np.linalg.norm(self.waypoints[-1] - xy))
         if goal_distance < c.goal_tolerance:
+            turn = self._align()
+            if turn is not None:
+                return turn
             self.clear_plan()
             self.events.append(("goal_reached", None))
             return self._stop("goal_reached")
@@ -304,6 +321,25 @@ class LocalRunner:
             self._pool.shutdown(wait=False, cancel_futures=True)
 
     # ---------------------------------------------------------------------------- helpers
+    def _align(self) -> Command | None:
+        """At the goal's position: a turn in place towards the goal's heading, or None when
+        there is none to make (no heading, within ``yaw_goal_tolerance``, or turning here would
+        hit something: then a "heading_blocked" event, and the goal ends at its position)."""
+        if self.goal_yaw is None:
+            return None
+        yaw = self.pose[2]
+        error = (self.goal_yaw - yaw + math.pi) % (2.0 * math.pi) - math.pi
+        if abs(error) <= self.config.yaw_goal_tolerance:
+            return None
+        if self.can_turn is not None and not self.can_turn(self.pose):
+            self.events.append(("heading_blocked", error))
+            return None
+        max_w = self.config.max_w
+        w = math.copysign(min(max(abs(ALIGN_GAIN * error), min(MIN_ALIGN_W, max_w)), max_w),
+                          error)
+        self.v = 0.0
+        return Command(0.0, w, "aligning")
+
     def _stop(self, reason: str) -> Command:
         self.v = 0.0
         return Command(0.0, 0.0, reason)
@@ -377,6 +413,16 @@ class SegmentRefiner:
         """Judge on ``grid`` and guide DD / polishing by ``costmap`` from now on (the static map
         fused with what the scans see: :class:`ecahd_core.sensing.LocalWorld`)."""
         self.grid, self.planner.costmap = grid, costmap
+
+    def can_turn(self, pose) -> bool:
+        """The footprint may turn in place at ``pose`` (x, y, yaw): every wall is at least its
+        circumscribed radius from the position (a circle always may where it stands free)."""
+        from ecahd_core.collision import wall_distance
+
+        if self.footprint.is_circle:  # turning sweeps nothing new
+            return True
+        xy = np.asarray(pose[:2], dtype=np.float64).reshape(1, 2)
+        return bool(wall_distance(self.grid, xy)[0] >= self.footprint.circumscribed_radius)
 
     def judge(self, plan: np.ndarray) -> bool:
         """The exact checker's verdict on ``plan`` (P, 2): collision-free, or starting in contact

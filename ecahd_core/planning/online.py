@@ -396,6 +396,10 @@ class OnlinePlanner:
         """The local stage cannot follow the plan (``reason``, e.g. "blocked")."""
         self.runner.request_replan(reason)
 
+    def cancel(self) -> None:
+        """Drop the goal and its plan: nothing is planned until the next goal."""
+        self.runner.cancel()
+
     def observe(self, window, now: float) -> None:
         """A local costmap window (GridMap): its obstacles are remembered for re-plans."""
         if self.memory is not None:
