@@ -38,6 +38,7 @@ CONSOLE_SCRIPTS = [
     "bag_recorder = ecahd_ros.bag_recorder:main",
     "global_planner = ecahd_ros.global_planner:main",
     "local_refiner = ecahd_ros.local_refiner:main",
+    "web_view = ecahd_ros.web_view:main",
 ]
 
 setup(

@@ -19,6 +19,7 @@ NODES = {
     "local_refiner": "ecahd_ros.local_refiner_params",
     "bag_recorder": "ecahd_ros.bag_recorder",
     "map_publisher": "ecahd_ros.map_publisher",
+    "web_view": "ecahd_ros.web_view",
 }
 HEADER = """\
 # Parameters of the ecahd_ros nodes, with their defaults: `ros2 run ecahd_ros <node>

@@ -82,6 +82,7 @@ class DemoConfig:
     moving: int = 0
     models: Path | None = None  # folder of <map name>_{sd,dd,fd}.pt (train-all --out-dir)
     domain_id: int | None = None  # None: derived from the process id
+    view_port: int | None = None  # serve the live view (web_view) on this port; None: no view
     # parameter overrides of the global_planner / local_refiner nodes (name -> value)
     planner_params: dict = field(default_factory=dict)
     refiner_params: dict = field(default_factory=dict)
@@ -138,6 +139,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-steps", type=int, default=800, help="control steps per episode")
     p.add_argument("--hold-steps", type=int, default=10,
                    help="control steps the reached goal is held before the next episode")
+    p.add_argument("--view", nargs="?", type=int, const=8080, default=None, metavar="PORT",
+                   help="serve a live view of the run for a web browser on PORT (default "
+                        "8080): http://localhost:PORT (the web_view node)")
     p.add_argument("--domain-id", type=int, default=None,
                    help="ROS_DOMAIN_ID of the private context (default: from the process id)")
     add_obstacle_arguments(p)
@@ -181,11 +185,13 @@ def _node_parameters(config: DemoConfig, start) -> dict[str, dict]:
         "local_refiner": {**common, **{k: v for k, v in models.items() if k == "dd_model"},
                           "control_clock": control_clock(config.realtime_factor),
                           **config.refiner_params},
+        **({"web_view": {"robot": config.robot, "port": config.view_port,
+                         "use_sim_time": True}} if config.view_port is not None else {}),
     }
 
 
 NODE_MODULES = {"sim_bridge": "sim_bridge.node", "global_planner": "ecahd_ros.global_planner",
-                "local_refiner": "ecahd_ros.local_refiner"}
+                "local_refiner": "ecahd_ros.local_refiner", "web_view": "ecahd_ros.web_view"}
 
 
 class NodeProcess:
@@ -343,7 +349,9 @@ def run_demo(config: DemoConfig) -> DemoResult:
         demo = rclpy.create_node("demo", context=ctx)
         nodes += [recorder, demo]
         procs += [NodeProcess(name, params[name], domain=domain, out=config.out)
-                  for name in NODE_MODULES]
+                  for name in NODE_MODULES if name in params]
+        if config.view_port is not None:
+            print(f"live view: http://localhost:{config.view_port}", flush=True)
         goal_pub = demo.create_publisher(PoseStamped, "goal_pose", STREAM_QOS)
         state = {"odom": None, "cmd": None, "refiner_ready": False, "planner_ready": False}
         # goal -> first plan latency of the current episode: goal (x, y), perf_counter when it
@@ -429,7 +437,9 @@ def run_demo(config: DemoConfig) -> DemoResult:
             msg.header.frame_id = "map"
             msg.header.stamp = demo.get_clock().now().to_msg()
             msg.pose.position.x, msg.pose.position.y = float(goal[0]), float(goal[1])
-            # orientation all zeros: any heading at the goal (the benchmarks time the trip)
+            # orientation all zeros (w defaults to 1: heading 0): any heading at the goal, the
+            # benchmarks time the trip
+            msg.pose.orientation.w = 0.0
             latency.update(goal=(float(goal[0]), float(goal[1])), ms=None)
             latency["sent"] = time.perf_counter()
             state["cmd"] = None
@@ -499,6 +509,7 @@ def run(args: argparse.Namespace) -> int:
                         seed=args.seed, realtime_factor=args.realtime_factor,
                         max_steps=args.max_steps, hold_steps=args.hold_steps,
                         domain_id=args.domain_id, obstacles=args.obstacles,
+                        view_port=args.view,
                         moving=args.moving, first_episode=args.first_episode,
                         models=Path(args.models) if args.models else None,
                         planner_params={"method": args.method},

@@ -92,7 +92,7 @@ def test_robot_stops_without_the_refiner_and_a_new_refiner_resumes_to_the_goal(g
     goal = PoseStamped()
     goal.header.frame_id = "map"
     goal.pose.position.x, goal.pose.position.y = GOAL
-    # orientation all zeros: any heading
+    goal.pose.orientation.w = 0.0  # all zeros: any heading (w defaults to 1)
     g.goal_pub.publish(goal)
     g.spin_until(lambda: g.state.v > 0.2, "the robot drives")
 

@@ -56,7 +56,7 @@ class Loop:
         goal = PoseStamped()
         goal.header.frame_id = "map"
         goal.pose.position.x, goal.pose.position.y = GOAL
-        # orientation all zeros: any heading
+        goal.pose.orientation.w = 0.0  # all zeros: any heading (w defaults to 1)
         self.spin_until(lambda: self.goal_pub.get_subscription_count() > 0,
                         "the planner subscribed")
         self.goal_pub.publish(goal)
