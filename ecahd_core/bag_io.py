@@ -18,6 +18,26 @@ from ecahd_core.errors import BagError
 TYPESTORE = Stores.ROS2_JAZZY  # the message definitions bags are written and read with
 
 
+def _bag_folder(path) -> Path:
+    path = Path(path)
+    if not (path / "metadata.yaml").is_file():
+        raise BagError(f"{str(path)!r} is not a rosbag2 directory (no metadata.yaml)")
+    return path
+
+
+def bag_topics(path) -> dict[str, int]:
+    """The topics of a rosbag2 bag -> {topic: message count}, from its index alone (no message
+    is read), so a caller can pick what to read from a large bag. Raises as :func:`read_bag`."""
+    from rosbags.highlevel import AnyReader, AnyReaderError
+
+    path = _bag_folder(path)
+    try:
+        with AnyReader([path], default_typestore=get_typestore(TYPESTORE)) as reader:
+            return {topic: int(info.msgcount) for topic, info in reader.topics.items()}
+    except AnyReaderError as exc:
+        raise BagError(f"cannot read bag {str(path)!r}: {exc}") from exc
+
+
 def read_bag(path, topics=None) -> dict[str, list[tuple[int, object]]]:
     """Read a rosbag2 bag (MCAP or SQLite3) -> {topic: [(receive time [ns], message), ...]} in
     time order, every recorded topic present (maybe with an empty list: a topic that was
@@ -25,9 +45,7 @@ def read_bag(path, topics=None) -> dict[str, list[tuple[int, object]]]:
     a folder without metadata.yaml or a bag rosbags cannot read."""
     from rosbags.highlevel import AnyReader, AnyReaderError
 
-    path = Path(path)
-    if not (path / "metadata.yaml").is_file():
-        raise BagError(f"{str(path)!r} is not a rosbag2 directory (no metadata.yaml)")
+    path = _bag_folder(path)
     try:
         with AnyReader([path], default_typestore=get_typestore(TYPESTORE)) as reader:
             connections = [c for c in reader.connections if topics is None or c.topic in topics]

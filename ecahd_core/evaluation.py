@@ -14,9 +14,12 @@ Metrics (D4RL maze2d-large-v1 conventions, as the paper uses them):
   t_0 + k * period, t_0 the episode's first odometry stamp.
 - First Reach: the first k whose state is within ``goal_radius``; None if never.
 - Collision Rate: the percentage of simulation steps whose contact flag is set (the ``collision``
-  topic, one flag per step). Separately, the driven path (odometry x, y, yaw) is judged by the
-  exact swept-footprint checker (``collision.check_collision``): collision free or not, and the
-  fraction of its dense poses that penetrate a wall.
+  topic, one flag per step); a recording without the simulator's flags (a real robot's) takes
+  them from the exact checker instead, one per odometry pose (:func:`exact_contacts`: the
+  footprint at that pose overlaps an occupied map cell). Separately, the driven path
+  (odometry x, y, yaw) is judged by the exact swept-footprint checker
+  (``collision.check_collision``): collision free or not, and the fraction of its dense poses
+  that penetrate a wall.
 - Inference Time: the sum of the episode's planning timing records [ms] / 1000, in seconds:
   every stage but "control" (SD / FD / A* global plans, J checks, DD).
 - reached: the goal was within ``goal_radius`` at some control step.
@@ -61,6 +64,7 @@ CONTROL_STAGE = "control"  # timing stage of a control tick: latency, not infere
 PLAN_STAGES = ("sd", "astar", "fd", "fallback_astar")  # one global plan each
 FALLBACK_STAGE = "fallback_astar"  # A* round a blockage after repeated blocked replans
 CONTACT_KINDS = ("wall", "static_obstacle", "moving_obstacle")  # collision_detail "kind"
+PLAN_GOAL_SHIFT = 0.05  # [m] a plan whose end moved farther than this starts a new goal
 
 
 @dataclass(frozen=True)
@@ -275,6 +279,21 @@ def evaluate_episode(data: EpisodeData, *, index: int = 0, grid: GridMap | None 
         cmd_jitter_ms_p99=stats.jitter_p99, cmd_interval_nominal_ms=stats.nominal)
 
 
+def exact_contacts(poses, footprint: Footprint, grid: GridMap) -> np.ndarray:
+    """The contact flag of each step where no simulator reports one: (N, 3) poses x [m],
+    y [m], yaw [rad] in the map frame -> (N,) bool, the footprint placed at the pose overlaps
+    an occupied cell (or off-map space) deeper than the exact checker's tolerance: the test
+    ``collision.check_collision`` applies to each of its dense poses. Only what the map holds
+    is seen: an obstacle that was not on it is never a contact here. Raises TrajectoryError for
+    non-finite poses."""
+    from ecahd_core.collision import DEFAULT_TOLERANCE, pose_depths
+
+    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    if len(poses) == 0:
+        return np.zeros(0, dtype=bool)
+    return pose_depths(poses, footprint, grid) > DEFAULT_TOLERANCE
+
+
 def _control_mask(data: EpisodeData) -> np.ndarray:
     """(T,) bool: which timing records are control ticks (a record without a stage is not)."""
     n = np.asarray(data.timing_ms).reshape(-1).size
@@ -377,6 +396,30 @@ def episode_index(goal_times, times) -> np.ndarray:
     if np.any(np.diff(goal_times) < 0):
         raise TrajectoryError("goal times must be in time order")
     return np.searchsorted(goal_times, np.asarray(times, dtype=np.float64), side="right") - 1
+
+
+def goals_from_plans(plans, *, shift: float = PLAN_GOAL_SHIFT) -> np.ndarray:
+    """Goals from global plans, for a recording whose goals went through an action (Nav2's
+    navigate_to_pose) rather than a topic: a plan whose last point lies more than ``shift``
+    [m] from the previous plan's last point starts a goal at that point; replans of the same
+    goal (their ends within ``shift``) do not, nor do empty plans (ignored). Two goals sent in
+    a row to the same point (within ``shift``) are one.
+
+    Args:
+        plans: [(receive time [s], (P, 2) x, y [m] of the plan's points)] in time order.
+    Returns:
+        (G, 3) receive time [s], x, y [m] of each goal, as :func:`split_episodes` takes them.
+    """
+    goals, last = [], None
+    for t, points in plans:
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        if len(points) == 0:
+            continue
+        end = points[-1]
+        if last is None or float(np.linalg.norm(end - last)) > shift:
+            goals.append((float(t), float(end[0]), float(end[1])))
+        last = end
+    return np.asarray(goals, dtype=np.float64).reshape(-1, 3)
 
 
 def split_episodes(goals, odom, *, collisions=None, timing=None, cmd_vel_times=None,

@@ -1,10 +1,32 @@
 """``ecahd eval-bag BAG``: the paper's Table III metrics from a recorded closed-loop run.
 
-The bag (as ``bag_recorder`` or ``ros2 bag record`` writes it) must hold ``map``, ``goal_pose``
-and ``odom``; ``collision``, ``cmd_vel`` and ``ecahd/timing`` are used when present. Every
-``goal_pose`` starts an episode that ends at the next one or at the end of the bag
-(``ecahd_core.evaluation``). Episodes are cut on the bag's receive times (one clock for all
-topics); control steps and durations come from the odometry stamps (simulated time).
+The bag (as ``bag_recorder`` or ``ros2 bag record`` writes it, in our simulator or on a robot
+running Nav2-style software) must hold ``map``, goals and the robot's pose; ``collision``,
+``cmd_vel`` and ``ecahd/timing`` are used when present. Every goal starts an episode that ends
+at the next one or at the end of the bag (``ecahd_core.evaluation``). Episodes are cut on the
+bag's receive times (one clock for all topics); control steps and durations come from the pose
+stamps (simulated time in the simulator).
+
+Where each input comes from (``BagSources``, in the JSON and under the table):
+
+- Namespace: the topics may live under one (``/robot1/odom``, ``/robot1/map``, ...;
+  ``--namespace``). By default the root is used when it has ``map`` and a pose source
+  (``odom``, or ``tf`` / ``tf_static``), else the one namespace that has them (several:
+  BagError naming them). ``tf`` and ``tf_static`` are the namespace's own when it recorded
+  them, else the global ones.
+- Poses: ``odom`` (in ``map``, or in another frame placed in ``map`` through the recorded tf,
+  REP-105). Without odometry: ``--base-frame`` (Nav2's ``robot_base_frame``, ``base_link``) in
+  ``map`` from ``tf`` + ``tf_static``, sampled at the stamps of the lowest dynamic transform
+  of its chain (the one ending in the base frame, or in its first ancestor that is not
+  attached by a static transform, e.g. ``odom -> base_footprint``).
+- Goals: ``goal_pose``. Without it (goals sent through Nav2's navigate_to_pose action are on
+  no topic): the global ``plan``s; a plan whose last point moved more than 0.05 m from the
+  previous plan's starts a goal there (``evaluation.goals_from_plans``), so an episode begins
+  when its first plan is received.
+- Contacts: the simulator's ``collision`` flags ("simulator"). Without them (a real robot):
+  one flag per pose from the exact checker, the footprint at the pose against the map
+  ("exact_checker", ``evaluation.exact_contacts``); obstacles that are not on the map are not
+  seen.
 
 Inference time counts the planning records of ``ecahd/timing`` (SD / FD / A*, J checks, DD);
 the local refiner's "control" records (the wall time of each control tick) are reported apart,
@@ -40,28 +62,62 @@ from ecahd_core.bench.output import write_json
 log = logging.getLogger("ecahd.eval_bag")
 
 TOPICS = ("/map", "/goal_pose", "/odom", "/collision", "/collision_detail", "/cmd_vel",
-          "/ecahd/timing", "/tf", "/tf_static")
+          "/ecahd/timing", "/plan", "/tf", "/tf_static")
+TF_TOPICS = ("/tf", "/tf_static")  # a namespace's own when recorded, else the global ones
 GLOBAL_FRAME = "map"  # the frame of the map, the goals and the scored poses
+BASE_FRAME = "base_link"  # Nav2's robot_base_frame: the pose scored when there is no odometry
 COLORS = ("tab:purple", "tab:blue", "tab:orange", "tab:green", "tab:brown", "tab:pink",
           "tab:olive", "tab:cyan")
 
 
+@dataclass(frozen=True)
+class BagSources:
+    """Where ``evaluate_bag`` took its inputs from (see the module docstring)."""
+
+    namespace: str  # "" (none) or "/robot1"
+    topics: dict  # [str, str] the name read ("/odom") -> the bag's topic ("/robot1/odom")
+    poses_from: str  # "odom" | "tf"
+    goals_from: str  # "goal_pose" | "plan"
+    contacts_from: str  # "simulator" | "exact_checker"
+    base_frame: str = BASE_FRAME  # the frame whose pose tf gives (poses_from "tf")
+
+    def to_dict(self) -> dict:
+        return {"namespace": self.namespace, "poses_from": self.poses_from,
+                "goals_from": self.goals_from, "contacts_from": self.contacts_from}
+
+    def markdown(self) -> str:
+        """One line saying where the poses, goals and contact figures came from."""
+        t = self.topics
+        poses = (f"`{t['/odom']}`" if self.poses_from == "odom" else
+                 f"`{self.base_frame}` in `{GLOBAL_FRAME}` from `{t['/tf']}` + "
+                 f"`{t['/tf_static']}`")
+        goals = (f"`{t['/goal_pose']}`" if self.goals_from == "goal_pose" else
+                 f"the ends of `{t['/plan']}` (no goal_pose recorded)")
+        contacts = (f"the simulator's `{t['/collision']}` flags"
+                    if self.contacts_from == "simulator" else
+                    "the exact checker (the footprint at each pose against the map; no contact "
+                    "flags recorded, obstacles not on the map unseen)")
+        return f"\nSources: poses {poses}; goals {goals}; contacts from {contacts}.\n"
+
+
 @dataclass
 class BagEvaluation:
-    """What ``evaluate_bag`` found: the map, the episodes' data and metrics, their means."""
+    """What ``evaluate_bag`` found: the map, the episodes' data and metrics, their means, and
+    where each input came from."""
 
     grid: object  # GridMap
     footprint: object  # Footprint
     episodes: list  # [EpisodeData]
     metrics: list  # [EpisodeMetrics]
     summary: object  # Summary
+    sources: BagSources
 
     def to_dict(self, bag: str = "") -> dict:
         from ecahd_core.evaluation import PAPER_TABLE_III
 
         return {"bag": bag, "map": {"name": self.grid.name, "fingerprint": self.grid.fingerprint(),
                                     "resolution": self.grid.resolution},
-                "robot": self.footprint.name,
+                "robot": self.footprint.name, **self.sources.to_dict(),
                 "mean": self.summary.to_dict(),
                 "episodes": [m.to_dict() for m in self.metrics],
                 "paper_table_iii": {k: vars(v) for k, v in PAPER_TABLE_III.items()}}
@@ -82,6 +138,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="footprint for the exact path check: circle | quadruped | humanoid | "
                         "Nav2 polygon (the bag does not record it)")
     p.add_argument("--map-name", default="recorded", help="name given to the recorded map")
+    p.add_argument("--namespace", default=None, metavar="NS",
+                   help="the robot's topic namespace, e.g. /robot1 (default: auto, the root or "
+                        "the one namespace with map and odom or tf)")
+    p.add_argument("--base-frame", default=BASE_FRAME,
+                   help="the robot's frame whose pose in map tf gives when the bag has no odom")
     p.add_argument("--goal-radius", type=float, default=0.5, help="[m] reward / reach radius")
     p.add_argument("--max-steps", type=int, default=800, help="control steps per episode")
     p.add_argument("--control-period", type=float, default=0.1,
@@ -107,22 +168,81 @@ def _json_records(messages, topic: str, required: tuple[str, ...]) -> list[tuple
     return out
 
 
+def _namespaces(counts: dict) -> list[str]:
+    """The namespaces of a bag's topics: each prefix P ("/robot1") of a topic P + one of
+    TOPICS."""
+    found = {topic[:-len(name)] for topic in counts for name in TOPICS
+             if topic.endswith(name) and len(topic) > len(name)}
+    return sorted(found)
+
+
+def resolve_topics(counts: dict, namespace: str | None, path) -> tuple[str, dict]:
+    """Which of the bag's topics to read: ``counts`` {topic: messages} (``bag_topics``),
+    ``namespace`` "/robot1" (a missing leading '/' is added; "" or "/": the root) or None:
+    auto, the root when it has /map and a pose source (/odom, /tf, /tf_static), else the one
+    namespace that has them. -> (namespace, {name in TOPICS: the bag's topic}); tf's are the
+    namespace's own when it recorded messages on them, else the global ones. Raises BagError
+    for several candidate namespaces or a namespace with no topic in the bag."""
+    from ecahd_core.errors import BagError
+
+    def has(topic: str) -> bool:
+        return counts.get(topic, 0) > 0
+
+    def tf_of(ns: str) -> dict:
+        return {t: ns + t if has(ns + t) else t for t in TF_TOPICS}
+
+    def usable(ns: str) -> bool:
+        return has(ns + "/map") and (has(ns + "/odom") or any(map(has, tf_of(ns).values())))
+
+    spaces = _namespaces(counts)
+    if namespace is None:
+        ns, found = "", [s for s in spaces if usable(s)]
+        if not usable("") and len(found) > 1:
+            raise BagError(f"bag {str(path)!r} has the robot topics under several namespaces "
+                           f"({', '.join(found)}); pick one with --namespace")
+        if not usable("") and found:
+            ns = found[0]
+            log.info("%s: namespace %s (auto-detected)", path, ns)
+    else:
+        ns = "/" + namespace.strip().strip("/") if namespace.strip().strip("/") else ""
+        if ns and not any(t.startswith(ns + "/") for t in counts):
+            raise BagError(f"bag {str(path)!r} has no topic under namespace {ns!r} "
+                           f"(namespaces in it: {', '.join(spaces) or 'none'})")
+    return ns, {**{t: ns + t for t in TOPICS}, **tf_of(ns)}
+
+
+def _read_transforms(data: dict):
+    """The bag's /tf_static and /tf in one TransformBuffer (every transform of the run kept)
+    -> (buffer, links {child: (parent, static)}, stamps {child: [(receive time [s], stamp [s])]}
+    of the dynamic transforms, count of malformed transforms skipped)."""
+    from ecahd_core.bag_io import stamp_seconds
+    from ecahd_core.frames import FrameError, TransformBuffer
+
+    buffer = TransformBuffer(cache_time=1e12)  # the whole recording
+    links, stamps, bad = {}, {}, 0
+    for topic, static in (("/tf_static", True), ("/tf", False)):
+        for t, msg in data.get(topic, []):
+            for transform in msg.transforms:
+                try:
+                    parent, child = buffer.add_stamped(transform, static=static)
+                except FrameError:
+                    bad += 1
+                    continue
+                links[child] = (parent, static)
+                if not static:
+                    stamps.setdefault(child, []).append(
+                        (t * 1e-9, stamp_seconds(transform.header.stamp)))
+    return buffer, links, stamps, bad
+
+
 def _in_global_frame(odom: list, frames: list, data: dict, path) -> list:
     """Odometry records (receive time, stamp, x, y, yaw) in ``frames`` placed in GLOBAL_FRAME by
     the bag's /tf and /tf_static (every transform of the run kept); a record with no transform
     at its stamp is left out and counted in the log. BagError when none can be placed."""
     from ecahd_core.errors import BagError
-    from ecahd_core.frames import TRANSFORM_TOLERANCE, FrameError, TransformBuffer
+    from ecahd_core.frames import TRANSFORM_TOLERANCE, FrameError
 
-    buffer = TransformBuffer(cache_time=1e12)  # the whole recording
-    bad = 0
-    for topic, static in (("/tf_static", True), ("/tf", False)):
-        for _, msg in data.get(topic, []):
-            for t in msg.transforms:
-                try:
-                    buffer.add_stamped(t, static=static)
-                except FrameError:
-                    bad += 1
+    buffer, _, _, bad = _read_transforms(data)
     out, missing = [], 0
     for (t, stamp, x, y, yaw), frame in zip(odom, frames):
         if frame in ("", GLOBAL_FRAME):
@@ -143,35 +263,120 @@ def _in_global_frame(odom: list, frames: list, data: dict, path) -> list:
     return out
 
 
+def _poses_from_tf(data: dict, base_frame: str, topics: dict, path) -> list:
+    """Without odometry: ``base_frame``'s pose in GLOBAL_FRAME from the bag's tf, as records
+    (receive time, stamp, x, y, yaw) in stamp order, one per stamp of the lowest dynamic
+    transform of its chain (the one whose child is the base frame, or the first ancestor not
+    attached by a static transform). A stamp with no transform to GLOBAL_FRAME is left out and
+    counted in the log. BagError when there is no tf, no such frame, or no pose at all."""
+    from ecahd_core.errors import BagError
+    from ecahd_core.frames import TRANSFORM_TOLERANCE, FrameError
+
+    where = f"bag {str(path)!r} has no {topics['/odom']} messages"
+    tf = f"{topics['/tf']} / {topics['/tf_static']}"
+    buffer, links, stamps, bad = _read_transforms(data)
+    if not links:
+        raise BagError(f"{where} and no transforms on {tf}: no pose source; cannot evaluate")
+    if base_frame not in buffer.frames():
+        raise BagError(f"{where} and its {tf} has no frame {base_frame!r} (frames: "
+                       f"{', '.join(sorted(buffer.frames()))}); pass --base-frame")
+    frame = base_frame
+    while frame in links and links[frame][1]:  # up through the static links (mountings)
+        frame = links[frame][0]
+    if frame not in links:
+        raise BagError(f"{where} and {base_frame!r} moves on no dynamic transform of {tf} "
+                       f"(static up to {frame!r}); cannot evaluate")
+    first = {}  # stamp -> its first receive time (a transform sent twice is one sample)
+    for t, stamp in stamps[frame]:
+        first.setdefault(stamp, t)
+    out, missing, error = [], 0, None
+    for stamp in sorted(first):
+        try:
+            x, y, yaw = buffer.lookup(GLOBAL_FRAME, base_frame, stamp,
+                                      tolerance=TRANSFORM_TOLERANCE).xy_yaw()
+        except FrameError as exc:
+            missing, error = missing + 1, error or exc
+            continue
+        out.append((first[stamp], stamp, x, y, yaw))
+    if bad or missing:
+        log.warning("%s: %d malformed transform(s) skipped, %d stamp(s) of %s without a "
+                    "transform to %s left out", path, bad, missing, frame, GLOBAL_FRAME)
+    if not out:
+        raise BagError(f"{where}, and no pose of {base_frame!r} could be placed in "
+                       f"{GLOBAL_FRAME!r} from {tf}: {error}")
+    return out
+
+
+def _goals(data: dict, topics: dict, path) -> tuple[list, str]:
+    """The goals (receive time [s], x, y) and their source: goal_pose, else the plans' ends
+    (``evaluation.goals_from_plans``); BagError when there are neither."""
+    from ecahd_core.errors import BagError
+    from ecahd_core.evaluation import goals_from_plans
+
+    if data.get("/goal_pose"):
+        return [(t * 1e-9, m.pose.position.x, m.pose.position.y)
+                for t, m in data["/goal_pose"]], "goal_pose"
+    plans = [(t * 1e-9, [(p.pose.position.x, p.pose.position.y) for p in m.poses])
+             for t, m in data.get("/plan", [])]
+    goals = goals_from_plans(plans)
+    if not len(goals):
+        raise BagError(f"bag {str(path)!r} has no {topics['/goal_pose']} messages and no "
+                       f"non-empty {topics['/plan']} to take goals from; cannot evaluate")
+    return [tuple(g) for g in goals.tolist()], "plan"
+
+
 def evaluate_bag(path, *, robot: str = "circle", map_name: str = "recorded",
                  goal_radius: float = 0.5, max_steps: int = 800, control_period: float = 0.1,
-                 nominal_interval_ms: float | None = None) -> BagEvaluation:
+                 nominal_interval_ms: float | None = None, namespace: str | None = None,
+                 base_frame: str = BASE_FRAME) -> BagEvaluation:
     """Read a bag and compute the metrics of each episode; raises BagError when the map, goals
-    or odometry are missing."""
-    from ecahd_core.bag_io import quaternion_yaw, read_bag, stamp_seconds
+    or poses are missing. ``namespace``: the robot's topics' namespace (None: auto);
+    ``base_frame``: the frame whose pose tf gives when there is no odometry."""
+    from ecahd_core.bag_io import bag_topics, quaternion_yaw, read_bag, stamp_seconds
     from ecahd_core.errors import BagError
     from ecahd_core.evaluation import (cmd_intervals, control_times, evaluate_episode,
-                                       split_episodes, summarize)
+                                       exact_contacts, split_episodes, summarize)
     from ecahd_core.footprint import make_footprint
     from ecahd_core.maps import grid_from_occupancy_message
 
-    data = read_bag(path, topics=TOPICS)
-    for topic in ("/map", "/goal_pose", "/odom"):
-        if not data.get(topic):
-            raise BagError(f"bag {str(path)!r} has no {topic} messages; cannot evaluate")
+    counts = bag_topics(path)
+    ns, topics = resolve_topics(counts, namespace, path)
+    recorded = read_bag(path, topics=sorted(set(topics.values())))
+    data = {name: recorded[topic] for name, topic in topics.items() if topic in recorded}
+    if not data.get("/map"):
+        spaces = _namespaces(counts) if not ns else []
+        hint = f" (namespaces in it: {', '.join(spaces)}; pass --namespace)" if spaces else ""
+        raise BagError(f"bag {str(path)!r} has no {topics['/map']} messages{hint}; cannot "
+                       f"evaluate")
     # the rosbags dataclass has the rclpy message's field names; the float32 resolution is
     # restored (0.1 stays 0.1) as for a received map
     grid = grid_from_occupancy_message(data["/map"][-1][1], name=map_name)
     footprint = make_footprint(robot)
-    goals = [(t * 1e-9, m.pose.position.x, m.pose.position.y) for t, m in data["/goal_pose"]]
-    odom = [(t * 1e-9, stamp_seconds(m.header.stamp), m.pose.pose.position.x,
-             m.pose.pose.position.y, quaternion_yaw(m.pose.pose.orientation))
-            for t, m in data["/odom"]]
-    frames = {m.header.frame_id.lstrip("/") for _, m in data["/odom"]} - {"", GLOBAL_FRAME}
-    if frames:  # a robot's odometry (REP-105): placed in map through the recorded tf
-        odom = _in_global_frame(odom, [m.header.frame_id.lstrip("/") for _, m in data["/odom"]],
-                                data, path)
-    collisions = [(t * 1e-9, float(m.data)) for t, m in data.get("/collision", [])]
+    goals, goals_from = _goals(data, topics, path)
+    if data.get("/odom"):
+        odom = [(t * 1e-9, stamp_seconds(m.header.stamp), m.pose.pose.position.x,
+                 m.pose.pose.position.y, quaternion_yaw(m.pose.pose.orientation))
+                for t, m in data["/odom"]]
+        frames = {m.header.frame_id.lstrip("/") for _, m in data["/odom"]} - {"", GLOBAL_FRAME}
+        if frames:  # a robot's odometry (REP-105): placed in map through the recorded tf
+            odom = _in_global_frame(
+                odom, [m.header.frame_id.lstrip("/") for _, m in data["/odom"]], data, path)
+        poses_from = "odom"
+    else:  # a robot recorded without odometry: its base frame's pose from tf
+        odom, poses_from = _poses_from_tf(data, base_frame, topics, path), "tf"
+    if data.get("/collision"):
+        collisions = [(t * 1e-9, float(m.data)) for t, m in data["/collision"]]
+        contacts_from = "simulator"
+    else:  # no simulator: a contact is a pose whose footprint overlaps the map
+        flags = exact_contacts(np.array([o[2:5] for o in odom]), footprint, grid)
+        collisions = [(o[0], float(f)) for o, f in zip(odom, flags)]
+        contacts_from = "exact_checker"
+    sources = BagSources(namespace=ns, topics=topics, poses_from=poses_from,
+                         goals_from=goals_from, contacts_from=contacts_from,
+                         base_frame=base_frame)
+    log.info("%s: poses from %s, goals from %s (%d), contacts from %s", path,
+             topics["/odom"] if poses_from == "odom" else f"tf ({base_frame} in {GLOBAL_FRAME})",
+             topics["/" + goals_from], len(goals), contacts_from.replace("_", " "))
     timing = []
     for t, record in _json_records(data.get("/ecahd/timing", []), "ecahd/timing", ("ms",)):
         try:
@@ -193,7 +398,8 @@ def evaluate_bag(path, *, robot: str = "circle", map_name: str = "recorded",
     intervals = np.concatenate([cmd_intervals(ep) for ep in episodes]) if episodes else None
     return BagEvaluation(grid=grid, footprint=footprint, episodes=episodes, metrics=metrics,
                          summary=summarize(metrics, control_ms=control, intervals_ms=intervals,
-                                           nominal_interval_ms=nominal_interval_ms))
+                                           nominal_interval_ms=nominal_interval_ms),
+                         sources=sources)
 
 
 def draw_trajectories(result: BagEvaluation, path, *, title: str = "",
@@ -267,15 +473,17 @@ def write_outputs(result: BagEvaluation, bag, *, json_path=None, md_path=None,
     ``scenarios``: per episode, the obstacles not on the map, for the figure."""
     from ecahd_core.evaluation import markdown_table
 
-    table = markdown_table(result.summary, result.metrics) + notes
+    table = markdown_table(result.summary, result.metrics) + result.sources.markdown() + notes
     if json_path:
         write_json(json_path, {**result.to_dict(str(bag)), **(extra or {})})
     if md_path:
+        rate = ("% of sim steps in contact" if result.sources.contacts_from == "simulator" else
+                "% of poses whose footprint overlaps the map, by the exact checker")
         Path(md_path).parent.mkdir(parents=True, exist_ok=True)
         Path(md_path).write_text(f"# Closed-loop evaluation of `{bag}`\n\n"
                                  "Table III metrics (maze2d-large conventions: reward 1 per "
                                  "control step within 0.5 m of the goal, at most 800 steps; "
-                                 "collision rate: % of sim steps in contact).\n\n" + table)
+                                 f"collision rate: {rate}).\n\n" + table)
     if png_path:
         draw_trajectories(result, png_path, scenarios=scenarios)
     return table
@@ -387,7 +595,8 @@ def run(args: argparse.Namespace) -> int:
     result = evaluate_bag(args.bag, robot=args.robot, map_name=args.map_name,
                           goal_radius=args.goal_radius, max_steps=args.max_steps,
                           control_period=args.control_period,
-                          nominal_interval_ms=args.nominal_interval_ms)
+                          nominal_interval_ms=args.nominal_interval_ms,
+                          namespace=args.namespace, base_frame=args.base_frame)
     table = write_outputs(result, args.bag, json_path=args.json, md_path=args.md,
                           png_path=args.png, scenarios=_read_scenarios(args.scenarios,
                                                                         len(result.metrics)))

@@ -40,20 +40,32 @@ def _pose(x: float, y: float, yaw: float = 0.0):
 ODOM_IN_MAP = (0.5, 2.0, -np.pi / 2)
 
 
-def _tf(t: float):
-    x, y, yaw = ODOM_IN_MAP
+def _tf(t: float, parent: str = "map", child: str = "odom", pose=ODOM_IN_MAP):
+    """A TFMessage with one transform: ``child``'s pose (x, y, yaw) in ``parent`` at t [s]."""
+    x, y, yaw = pose
     vec, quat = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
     transform = T["geometry_msgs/msg/Transform"](
         translation=vec(x=x, y=y, z=0.0),
         rotation=quat(x=0.0, y=0.0, z=float(np.sin(yaw / 2)), w=float(np.cos(yaw / 2))))
     return T["tf2_msgs/msg/TFMessage"](transforms=[T["geometry_msgs/msg/TransformStamped"](
-        header=_header(t), child_frame_id="odom", transform=transform)])
+        header=_header(t, parent), child_frame_id=child, transform=transform)])
 
 
-def _map_msg():
-    # 4 m x 2 m at 0.1 m (stored as float32) with a one-cell wall frame
+def _in_odom(pose):
+    """A map pose (x, y, yaw) seen from odom's origin (ODOM_IN_MAP)."""
+    from ecahd_core.frames import Transform
+
+    return (Transform.from_xy_yaw(*ODOM_IN_MAP).inverse()
+            * Transform.from_xy_yaw(*pose)).xy_yaw()
+
+
+def _map_msg(wall_x: float | None = None):
+    # 4 m x 2 m at 0.1 m (stored as float32) with a one-cell wall frame; wall_x: one more
+    # wall, the cell column [wall_x, wall_x + 0.1] across the map
     data = np.zeros((20, 40), dtype=np.int8)
     data[0, :] = data[-1, :] = data[:, 0] = data[:, -1] = 100
+    if wall_x is not None:
+        data[:, int(round(wall_x / 0.1))] = 100
     info = T["nav_msgs/msg/MapMetaData"](map_load_time=_time(0.0), resolution=0.1, width=40,
                                          height=20, origin=_pose(0.0, 0.0))
     return T["nav_msgs/msg/OccupancyGrid"](header=_header(0.0), info=info,
@@ -66,10 +78,7 @@ def _odom(t: float, x: float, frame: str = "map"):
                                          angular=vec(x=0.0, y=0.0, z=0.0))
     pose = (x, 1.0, 0.0)
     if frame == "odom":  # the map pose seen from odom's origin
-        from ecahd_core.frames import Transform
-
-        pose = (Transform.from_xy_yaw(*ODOM_IN_MAP).inverse()
-                * Transform.from_xy_yaw(*pose)).xy_yaw()
+        pose = _in_odom(pose)
     return T["nav_msgs/msg/Odometry"](
         header=_header(t, frame), child_frame_id="base_link",
         pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=_pose(*pose),
@@ -82,7 +91,15 @@ def _string(text: str):
     return T["std_msgs/msg/String"](data=text)
 
 
-def write_bag(path, *, new_records: bool = True, odom_frame: str = "map") -> None:
+def _plan(t: float, points):
+    return T["nav_msgs/msg/Path"](header=_header(t), poses=[
+        T["geometry_msgs/msg/PoseStamped"](header=_header(t), pose=_pose(x, y))
+        for x, y in points])
+
+
+def write_bag(path, *, new_records: bool = True, odom_frame: str = "map", namespace="",
+              global_tf: bool = False, poses: str = "odom", goals: str = "goal_pose",
+              contacts: bool = True, wall_x: float | None = None) -> None:
     """Two episodes on the one clock (receive time = sim time [s]):
     0: goal (3.0, 1.0) at 0 s; the robot drives along y = 1 from x = 0.55 at 1 m/s, reaching
        x = 3.0 at 2.45 s; one SD plan; five control ticks; two static-obstacle contacts.
@@ -90,23 +107,51 @@ def write_bag(path, *, new_records: bool = True, odom_frame: str = "map") -> Non
        fallback_astar and an astar plan; three control ticks; a moving-obstacle and a wall
        contact.
     new_records False: a bag from before collision_detail and the monitor / wall keys.
-    odom_frame "odom": the odometry in odom and map -> odom (ODOM_IN_MAP) on /tf every 0.5 s."""
+    odom_frame "odom": the odometry in odom and map -> odom (ODOM_IN_MAP) on /tf every 0.5 s.
+    A real robot's recording of the same run (Nav2-style):
+    namespace: "/robot1" (or a tuple of them: the run under each) in front of every topic, tf's
+    too unless global_tf.
+    poses "tf": no odometry; map -> odom (ODOM_IN_MAP) on /tf every 0.5 s, odom ->
+       base_footprint at 50 Hz, base_footprint -> base_link (identity) and base_link ->
+       base_scan (0.1 m ahead) on /tf_static.
+    goals "plan": no goal_pose (navigate_to_pose); /plan at 0 s ending at (3.0, 1.0), a replan
+       at 1 s ending 0.03 m from it, an empty plan at 2 s, at 3.5 s a plan ending at (1.0, 1.0).
+    contacts False: no collision nor collision_detail (no simulator).
+    wall_x: a one-cell wall across the map at x = wall_x [m] (see _map_msg)."""
     msgs = []  # (t [s], topic, msgtype, message)
-    msgs.append((0.0, "/map", "nav_msgs/msg/OccupancyGrid", _map_msg()))
+    msgs.append((0.0, "/map", "nav_msgs/msg/OccupancyGrid", _map_msg(wall_x)))
     for t, (x, y) in ((0.0, (3.0, 1.0)), (3.5, (1.0, 1.0))):
-        msgs.append((t, "/goal_pose", "geometry_msgs/msg/PoseStamped",
-                     T["geometry_msgs/msg/PoseStamped"](header=_header(t), pose=_pose(x, y))))
-    contacts = {1.0: "static_obstacle", 1.02: "static_obstacle", 4.0: "moving_obstacle",
-                4.5: "wall"}
+        if goals == "goal_pose":
+            msgs.append((t, "/goal_pose", "geometry_msgs/msg/PoseStamped",
+                         T["geometry_msgs/msg/PoseStamped"](header=_header(t),
+                                                            pose=_pose(x, y))))
+        else:  # the planner's plans from the robot's start
+            msgs.append((t, "/plan", "nav_msgs/msg/Path", _plan(t, [(0.55, 1.0), (x, y)])))
+    if goals == "plan":
+        msgs.append((1.0, "/plan", "nav_msgs/msg/Path", _plan(1.0, [(1.55, 1.0), (3.03, 1.0)])))
+        msgs.append((2.0, "/plan", "nav_msgs/msg/Path", _plan(2.0, [])))
+    if poses == "tf":
+        for child, parent, pose in (("base_link", "base_footprint", (0.0, 0.0, 0.0)),
+                                    ("base_scan", "base_link", (0.1, 0.0, 0.0))):
+            msgs.append((0.0, "/tf_static", "tf2_msgs/msg/TFMessage",
+                         _tf(0.0, parent, child, pose)))
+    hits = {1.0: "static_obstacle", 1.02: "static_obstacle", 4.0: "moving_obstacle",
+            4.5: "wall"}
     for i in range(251):  # 50 Hz for 5 s
         t = i / 50
         x = min(0.55 + t, 3.0)
-        msgs.append((t, "/odom", "nav_msgs/msg/Odometry", _odom(t, x, odom_frame)))
-        if odom_frame != "map" and i % 25 == 0:
+        if poses == "odom":
+            msgs.append((t, "/odom", "nav_msgs/msg/Odometry", _odom(t, x, odom_frame)))
+        else:
+            msgs.append((t, "/tf", "tf2_msgs/msg/TFMessage",
+                         _tf(t, "odom", "base_footprint", _in_odom((x, 1.0, 0.0)))))
+        if (odom_frame != "map" or poses == "tf") and i % 25 == 0:
             msgs.append((t, "/tf", "tf2_msgs/msg/TFMessage", _tf(t)))
-        hit = next((kind for tc, kind in contacts.items() if abs(tc - t) < 1e-9), None)
-        msgs.append((t, "/collision", "std_msgs/msg/Bool", T["std_msgs/msg/Bool"](data=bool(hit))))
-        if hit and new_records:
+        hit = next((kind for tc, kind in hits.items() if abs(tc - t) < 1e-9), None)
+        if contacts:
+            msgs.append((t, "/collision", "std_msgs/msg/Bool",
+                         T["std_msgs/msg/Bool"](data=bool(hit))))
+        if hit and new_records and contacts:
             msgs.append((t + 1e-4, "/collision_detail", "std_msgs/msg/String", _string(
                 json.dumps({"t": t, "kind": hit, "obstacle": 0, "x": x, "y": 1.0,
                             "contact_count": 1}))))
@@ -127,8 +172,17 @@ def write_bag(path, *, new_records: bool = True, odom_frame: str = "map") -> Non
     for t, record in timing:
         msgs.append((t, "/ecahd/timing", "std_msgs/msg/String", _string(json.dumps(record))))
     msgs.append((0.3, "/ecahd/timing", "std_msgs/msg/String", _string("not json")))  # skipped
-    if new_records:
+    if new_records and contacts:
         msgs.append((0.4, "/collision_detail", "std_msgs/msg/String", _string("{}")))  # no kind
+    prefixes = (namespace,) if isinstance(namespace, str) else tuple(namespace)
+
+    def recorded_as(topic: str) -> list[str]:  # under each namespace; global tf's once
+        if global_tf and topic in ("/tf", "/tf_static"):
+            return [topic]
+        return [prefix + topic for prefix in prefixes]
+
+    msgs = [(t, name, msgtype, msg) for t, topic, msgtype, msg in msgs
+            for name in recorded_as(topic)]
     with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
         conns = {}
         for t, topic, msgtype, msg in sorted(msgs, key=lambda m: m[0]):
@@ -136,6 +190,21 @@ def write_bag(path, *, new_records: bool = True, odom_frame: str = "map") -> Non
                 conns[topic] = writer.add_connection(topic, msgtype, typestore=TS)
             writer.write(conns[topic], int(round(t * 1e9)) + 1,
                          TS.serialize_cdr(msg, msgtype))
+
+
+def copy_bag(src, dst, *, drop=()) -> None:
+    """Write bag ``src``'s messages to a new bag ``dst``, leaving out the topics in ``drop``."""
+    from rosbags.rosbag2 import Reader
+
+    with Reader(src) as reader:
+        keep = [c for c in reader.connections if c.topic not in drop]
+        rows = [(c, t, raw) for c, t, raw in reader.messages(connections=keep)]
+    with Writer(dst, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conns = {}
+        for c, t, raw in rows:
+            if c.topic not in conns:
+                conns[c.topic] = writer.add_connection(c.topic, c.msgtype, typestore=TS)
+            writer.write(conns[c.topic], t, raw)
 
 
 @pytest.mark.slow
@@ -228,20 +297,6 @@ def test_a_robots_bag_with_odometry_in_odom_is_scored_through_its_tf(tmp_path):
         assert (b.first_reach, b.reached, b.time_to_goal_s, b.contact_steps) == \
             (a.first_reach, a.reached, a.time_to_goal_s, a.contact_steps)
     # the same odometry without its tf cannot be placed in map
-    write_bag(tmp_path / "no_tf", odom_frame="odom")
-    import shutil
-
-    from rosbags.rosbag2 import Reader
-
-    with Reader(tmp_path / "no_tf") as reader:
-        keep = [c for c in reader.connections if c.topic != "/tf"]
-        rows = [(c, t, raw) for c, t, raw in reader.messages(connections=keep)]
-    shutil.rmtree(tmp_path / "no_tf")
-    with Writer(tmp_path / "no_tf", version=9, storage_plugin=StoragePlugin.MCAP) as writer:
-        conns = {}
-        for c, t, raw in rows:
-            if c.topic not in conns:
-                conns[c.topic] = writer.add_connection(c.topic, c.msgtype, typestore=TS)
-            writer.write(conns[c.topic], t, raw)
+    copy_bag(tmp_path / "odom", tmp_path / "no_tf", drop={"/tf"})
     with pytest.raises(BagError, match="record /tf and /tf_static"):
         evaluate_bag(tmp_path / "no_tf")
