@@ -286,9 +286,10 @@ def test_a_new_goal_pre_empts_the_running_one(rig):
     assert result.status == GoalStatus.STATUS_ABORTED and "goal_pose" in result.result.error_msg
 
 
-def test_fifty_goals_and_cancels_in_five_seconds(rig):
-    """A client gone mad: goals and cancels as fast as it can; every goal ends, the node keeps
-    planning and the last goal is reached."""
+def test_fifty_goals_and_cancels_in_a_burst(rig):
+    """A client gone mad: 50 goals, a third of them cancelled, as fast as it can (about 4 s
+    here, each goal planned on arrival); every goal ends, the node keeps planning and the
+    last goal is reached."""
     r = rig()
     r.ready()
     rng = np.random.default_rng(3)
@@ -301,7 +302,7 @@ def test_fifty_goals_and_cancels_in_five_seconds(rig):
         if i % 3 == 0:
             h.cancel_goal_async()
         r.spin_for(0.02)
-    assert time.monotonic() - t0 < 20.0
+    assert time.monotonic() - t0 < 20.0  # each waits for its acceptance: ~4 s here
     last = r.send(GOAL, 0.0)
     ends = [r.result(h) for h in handles]
     assert all(e.status in (GoalStatus.STATUS_ABORTED, GoalStatus.STATUS_CANCELED,
