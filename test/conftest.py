@@ -35,6 +35,25 @@ def ros_context():
     rclpy.try_shutdown(context=context)
 
 
+def rig_factory(rig_class, context):
+    """A fixture's body: yields ``make(**params)`` building ``rig_class(context, **params)``
+    (nodes on one executor), and closes every rig made once the test is over::
+
+        @pytest.fixture
+        def rig(ros_context):
+            yield from rig_factory(Rig, ros_context)
+    """
+    made = []
+
+    def make(**params):
+        made.append(rig_class(context, **params))
+        return made[-1]
+
+    yield make
+    for rig in made:
+        rig.close()
+
+
 def spin_until(executor, condition, timeout: float = 10.0, what: str = "condition") -> None:
     """Spin ``executor`` in 10 ms slices until ``condition()`` holds; fail the test naming
     ``what`` after ``timeout`` seconds of wall time."""

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 rclpy = pytest.importorskip("rclpy")
+from conftest import rig_factory  # noqa: E402
 from geometry_msgs.msg import PoseStamped  # noqa: E402
 from nav_msgs.msg import OccupancyGrid, Odometry, Path  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
@@ -92,15 +93,7 @@ class Rig:
 
 @pytest.fixture
 def rig(ros_context):
-    made = []
-
-    def make(**params):
-        made.append(Rig(ros_context, **params))
-        return made[-1]
-
-    yield make
-    for r in made:
-        r.close()
+    yield from rig_factory(Rig, ros_context)
 
 
 def ready(rig):

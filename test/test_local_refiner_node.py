@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 rclpy = pytest.importorskip("rclpy")
+from conftest import rig_factory  # noqa: E402
 from geometry_msgs.msg import Twist, TwistStamped  # noqa: E402
 from nav_msgs.msg import OccupancyGrid, Odometry, Path  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
@@ -98,15 +99,7 @@ class Rig:
 
 @pytest.fixture
 def rig(ros_context):
-    made = []
-
-    def make(**over):
-        made.append(Rig(ros_context, **over))
-        return made[-1]
-
-    yield make
-    for r in made:
-        r.close()
+    yield from rig_factory(Rig, ros_context)
 
 
 # a 0.3 m square robot: 0.35 m from the corridor walls, beyond J's 0.1 m margin, so a straight

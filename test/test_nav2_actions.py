@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 rclpy = pytest.importorskip("rclpy")
+from conftest import rig_factory  # noqa: E402
 nav2_msgs = pytest.importorskip("nav2_msgs.action")
 from action_msgs.msg import GoalStatus  # noqa: E402
 from geometry_msgs.msg import PoseStamped  # noqa: E402
@@ -180,15 +181,7 @@ class Rig:
 
 @pytest.fixture
 def rig(ros_context):
-    made = []
-
-    def make(**params):
-        made.append(Rig(ros_context, **params))
-        return made[-1]
-
-    yield make
-    for r in made:
-        r.close()
+    yield from rig_factory(Rig, ros_context)
 
 
 # ------------------------------------------------------------------------ navigate_to_pose
