@@ -210,12 +210,16 @@ class _BasicBlock(nn.Module):
 
 
 class MapEncoder(nn.Module):
-    """A small ResNet (stem + 3 strided basic blocks, 16-32-64 channels, global average pool):
-    (B, 1, H, W) occupancy in [0, 1] -> (B, d_model)."""
+    """A small ResNet (stem + one strided basic block per entry of ``channels``, default
+    16-32-64, then a global average pool): (B, in_channels, H, W) occupancy in [0, 1] ->
+    (B, d_model). :meth:`feature_map` gives the features before the pool (the generalist's
+    patch tokens, ``ecahd_core.general.model``)."""
 
-    def __init__(self, d_model: int, channels: tuple[int, ...] = (16, 32, 64)) -> None:
+    def __init__(self, d_model: int, channels: tuple[int, ...] = (16, 32, 64), *,
+                 in_channels: int = 1) -> None:
         super().__init__()
-        self.stem = nn.Sequential(nn.Conv2d(1, channels[0], 3, padding=1, bias=False),
+        self.in_channels = in_channels
+        self.stem = nn.Sequential(nn.Conv2d(in_channels, channels[0], 3, padding=1, bias=False),
                                   nn.GroupNorm(min(8, channels[0]), channels[0]), nn.ReLU())
         blocks, c_in = [], channels[0]
         for c_out in channels:
@@ -224,10 +228,16 @@ class MapEncoder(nn.Module):
         self.blocks = nn.Sequential(*blocks)
         self.proj = nn.Linear(c_in, d_model)
 
+    def feature_map(self, image: Tensor) -> Tensor:
+        """(B, in_channels, H, W) -> (B, C, H / 2^n, W / 2^n), n = len(channels), C the last
+        channel count (not projected to d_model)."""
+        if image.dim() != 4 or image.shape[1] != self.in_channels:
+            raise ValueError(f"map image must have shape (B, {self.in_channels}, H, W), "
+                             f"got {tuple(image.shape)}")
+        return self.blocks(self.stem(image))
+
     def forward(self, image: Tensor) -> Tensor:
-        if image.dim() != 4 or image.shape[1] != 1:
-            raise ValueError(f"map image must have shape (B, 1, H, W), got {tuple(image.shape)}")
-        h = self.blocks(self.stem(image))  # (B, C, H / 8, W / 8)
+        h = self.feature_map(image)  # (B, C, H / 8, W / 8)
         return self.proj(h.mean(dim=(2, 3)))  # (B, d_model)
 
 
@@ -282,13 +292,10 @@ class TransformerDenoiser(nn.Module):
         Returns:
             eps: (B, P, 2).
         """
-        t = _check_inputs(x, t, self.config.max_horizon)
+        t = check_inputs(x, t, self.config.max_horizon)
         B, P, _ = x.shape
-        tokens = self.point_embed(self.point_features(x)) + self.pos_embed[:, :P]  # (B, P, d)
-        horizon = torch.full((B,), P, dtype=torch.long, device=x.device)
-        cond = self.time_mlp(sinusoidal_embedding(t, self.config.d_model)) \
-            + self.horizon_embed(horizon)  # (B, d)
-        prefix = [cond[:, None]]
+        cond, tokens = self.embed(x, t)  # (B, 1, d), (B, P, d)
+        prefix = [cond]
         if self.map_encoder is not None:
             if map_feature is None:
                 if map_image is None:
@@ -302,6 +309,16 @@ class TransformerDenoiser(nn.Module):
         h = self._encode(h)
         return self.head(h[:, -P:])  # (B, P, 2)
 
+    def embed(self, x: Tensor, t: Tensor) -> tuple[Tensor, Tensor]:
+        """The condition token and the waypoint tokens: x (B, P, 2), t (B,) ->
+        (cond (B, 1, d), tokens (B, P, d)) (module docstring, "Transformer tokens")."""
+        B, P, _ = x.shape
+        tokens = self.point_embed(self.point_features(x)) + self.pos_embed[:, :P]  # (B, P, d)
+        horizon = torch.full((B,), P, dtype=torch.long, device=x.device)
+        cond = self.time_mlp(sinusoidal_embedding(t, self.config.d_model)) \
+            + self.horizon_embed(horizon)  # (B, d)
+        return cond[:, None], tokens
+
     def point_features(self, x: Tensor) -> Tensor:
         """(B, P, 2) normalised points -> (B, P, 2 + 4 F): the points, then sin and cos of
         each coordinate times each of the F frequencies (``fourier_bands``; F = 0: x itself)."""
@@ -310,8 +327,11 @@ class TransformerDenoiser(nn.Module):
         ang = x[..., None] * self.fourier_freqs.to(x.dtype)  # (B, P, 2, F)
         return torch.cat([x, ang.sin().flatten(-2), ang.cos().flatten(-2)], dim=-1)
 
-    def _encode(self, h: Tensor) -> Tensor:
-        """``self.encoder(h)``, (B, T, d) -> (B, T, d). Without gradients in eval mode the
+    def _encode(self, h: Tensor, before_layer=None) -> Tensor:
+        """``self.encoder(h)``, (B, T, d) -> (B, T, d). ``before_layer(i, h) -> h``, if given,
+        runs before encoder layer i (the generalist's cross-attention to the map,
+        ``ecahd_core.general.model``); it receives h in the layers' dtype and returns it in
+        the same. Without gradients in eval mode the
         encoder's layers run torch's fused ``_transformer_encoder_layer_fwd``
         (``nn.TransformerEncoderLayer``'s inference fast path); this calls that kernel and the
         final LayerNorm directly with the arguments the modules would pass, skipping their
@@ -319,16 +339,22 @@ class TransformerDenoiser(nn.Module):
         the module's in float32 (in bfloat16 after :meth:`set_inference_precision`: the layers
         compute in it, the final LayerNorm in float32 again). Any other case (training,
         gradients, autocast, fast path disabled, hooks) goes through the modules."""
-        if self.training or torch.is_grad_enabled() or torch.is_autocast_enabled() \
-                or not torch.backends.mha.get_fastpath_enabled():
-            return self.encoder(h)
-        args = self._fast_encoder_args()
+        args = None
+        if not (self.training or torch.is_grad_enabled() or torch.is_autocast_enabled()
+                or not torch.backends.mha.get_fastpath_enabled()):
+            args = self._fast_encoder_args()
         if args is None:
-            return self.encoder(h)
+            if before_layer is None:
+                return self.encoder(h)
+            for i, layer in enumerate(self.encoder.layers):  # what nn.TransformerEncoder does
+                h = layer(before_layer(i, h))
+            return self.encoder.norm(h)
         layers, norm = args
         dtype = h.dtype
         h = h.to(self.inference_dtype)
-        for layer_args in layers:
+        for i, layer_args in enumerate(layers):
+            if before_layer is not None:
+                h = before_layer(i, h)
             h = torch._transformer_encoder_layer_fwd(h, *layer_args)
         return nn.functional.layer_norm(h.to(dtype), *norm)
 
@@ -405,8 +431,8 @@ class TransformerDenoiser(nn.Module):
         super()._load_from_state_dict(*args, **kwargs)
 
 
-def _check_inputs(x: Tensor, t: Tensor | int, max_horizon: int) -> Tensor:
-    """Validate x (B, P, 2) and return t as (B,) on x's device."""
+def check_inputs(x: Tensor, t: Tensor | int, max_horizon: int) -> Tensor:
+    """Validate a denoiser's inputs x (B, P, 2) and t; return t as (B,) on x's device."""
     if x.dim() != 3 or x.shape[-1] != 2:
         raise ValueError(f"x must have shape (B, P, 2), got {tuple(x.shape)}")
     B, P, _ = x.shape
@@ -493,7 +519,7 @@ class TemporalUnetDenoiser(nn.Module):
         Returns:
             eps: (B, P, 2).
         """
-        t = _check_inputs(x, t, self.config.max_horizon)
+        t = check_inputs(x, t, self.config.max_horizon)
         B, P, _ = x.shape
         temb = self.time_mlp(sinusoidal_embedding(t, self.config.unet_channels[0]))  # (B, T)
         pad = -P % self.length_multiple
@@ -543,7 +569,7 @@ class EpsilonFromSample(nn.Module):
         return self.model.config
 
     def forward(self, x: Tensor, t: Tensor | int, **kwargs: Any) -> Tensor:
-        t = _check_inputs(x, t, self.model.config.max_horizon)
+        t = check_inputs(x, t, self.model.config.max_horizon)
         x0 = self.model(x, t, **kwargs)  # (B, P, 2)
         alpha_bar = self.alphas_cumprod[t].to(x.dtype)[:, None, None]  # (B, 1, 1)
         return (x - alpha_bar.sqrt() * x0) / (1 - alpha_bar).sqrt()
