@@ -236,6 +236,22 @@ class GridMap:
         if not np.any(~self.occupied):
             raise MapError(f"map {self.name!r} has no free cell")
 
+    def changed_share(self, other: "GridMap") -> float:
+        """The share of cells whose obstacle state differs in ``other``, an updated map of the
+        same site (a SLAM update, an edited map: the same cells, resolution and origin);
+        MapError naming the difference when ``other`` covers another extent."""
+        same = (self.occupied.shape == other.occupied.shape
+                and abs(self.resolution - other.resolution) < 1e-9
+                and np.allclose(self.origin, other.origin, atol=1e-6))
+        if not same:
+            raise MapError(
+                f"map {other.name!r} is not an update of {self.name!r}: "
+                f"{other.width} x {other.height} cells of {other.resolution:g} m at "
+                f"{tuple(round(v, 3) for v in other.origin)} against {self.width} x "
+                f"{self.height} of {self.resolution:g} m at "
+                f"{tuple(round(v, 3) for v in self.origin)}")
+        return float(np.mean(self.occupied != other.occupied))
+
     def fingerprint(self) -> str:
         """A short stable hash of the obstacle layout, resolution and origin (the map's identity
         recorded in datasets and checkpoints)."""

@@ -249,6 +249,21 @@ def load_model(kind: str, grid, *, path: str | Path | None = None, footprint=Non
     return ckpt
 
 
+def learnt_map(site, grid) -> tuple:
+    """The map a per-map model is checked against when ``grid`` arrives: ``grid`` itself when
+    it is the site's first map (``site`` None) or the same map, else ``site`` (the map the
+    models were loaded for) when ``grid`` is an update of it (same cells, resolution and
+    origin: a SLAM update, an edited map). Returns (that map, share of cells changed);
+    MapError when ``grid`` covers another extent (a per-map model cannot plan there).
+
+    An update keeps the models of the site: J, DD's guidance, the exact checker and the
+    safety net work on the new map, and the walls SD never learnt are detoured
+    (``OnlinePlanner.set_map(learnt=...)``)."""
+    if site is None or grid.fingerprint() == site.fingerprint():
+        return grid, 0.0
+    return site, site.changed_share(grid)
+
+
 def _check_shipped(kind: str, map_name: str, path) -> None:
     folders = model_search_path()
     known = sorted({p.stem for d in folders if d.is_dir() for p in d.glob("*.pt")})

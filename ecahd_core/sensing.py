@@ -503,6 +503,16 @@ class ObstacleMemory:
         self.persistence = float(persistence)
         self._last = np.full(grid.data.shape, -np.inf)  # (H, W) [s] last time marked
         self._cost_cache = None  # (key of the static cost and the marks, the fused J tuple)
+        # (H, W) walls of the map the models never learnt (an update of the site's map): held
+        # for good, so SD's plans that cross them are detoured as a scanned blockage is
+        self.unlearnt = np.zeros(grid.data.shape, dtype=bool)
+
+    def learnt_from(self, learnt: GridMap) -> int:
+        """The models learnt ``learnt``, an earlier map of this site: the walls added since
+        (occupied here, free there) are remembered for good. Returns how many cells."""
+        learnt.changed_share(self.grid)  # MapError when it is another extent
+        self.unlearnt = self.grid.occupied & ~learnt.occupied
+        return int(self.unlearnt.sum())
 
     def update(self, window: GridMap, now: float) -> None:
         """A window (its ``data``: 100 marked, 0 seen free, -1 not seen) at time ``now`` [s]."""
@@ -523,8 +533,9 @@ class ObstacleMemory:
 
     def mask(self, now: float, within: float | None = None) -> np.ndarray:
         """(H, W) bool cells remembered as blocked at ``now`` (marked in the last ``within``
-        seconds; default the persistence)."""
-        return self._last >= now - (self.persistence if within is None else within)
+        seconds; default the persistence), and the walls the models never learnt."""
+        return (self._last >= now - (self.persistence if within is None else within)) \
+            | self.unlearnt
 
     def fused(self, now: float, within: float | None = None) -> GridMap:
         """The static map with the remembered cells occupied."""

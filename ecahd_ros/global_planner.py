@@ -79,6 +79,7 @@ from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
 from ecahd_core.errors import EcahdError, PlanningError
+from ecahd_core.model_zoo import learnt_map
 from ecahd_core.planning.mission import Mission
 from ecahd_core.planning.online import ASTAR_SPACING, OnlinePlanner, PlanOutcome
 from ecahd_core.planning.sparse import SparseDiffusion
@@ -117,6 +118,8 @@ class GlobalPlanner(ManagedNode):
         self.tf: TfListener | None = None
         self._actions: list = []  # the Nav2 action servers, once configured
         self.mission: Mission | None = None  # the navigate_to_pose goal being driven to
+        self._site = None  # the map the models were loaded for (updates of it keep them)
+        self.map_changed = 0.0  # share of the map's cells changed since the models' map
         # configuration errors raise with autostart: spin_node exits non-zero with one line
         self.start(self.get_parameter("autostart").value)
 
@@ -188,6 +191,7 @@ class GlobalPlanner(ManagedNode):
         self._actions, self.navigate, self.mission = [], None, None
         self.destroy_made()
         self.planning, self.tf, self.pose, self.robot_pose = None, None, None, None
+        self._site = None
 
     @property
     def ready(self) -> bool:
@@ -222,10 +226,12 @@ class GlobalPlanner(ManagedNode):
         check_frame(msg.header.frame_id, p.global_frame, "map")
         t0 = time.perf_counter()
         grid = msg_to_grid(msg, name=p.map_name)
+        # with a model, an update of the site's map keeps it (MapError: another extent)
+        learnt, changed = (grid, 0.0) if p.method == "astar" else learnt_map(self._site, grid)
         built = {}
         warm = ""
         if p.method == "sd":
-            built["sd"] = sd = self._build_sd(grid)
+            built["sd"] = sd = self._build_sd(grid, learnt)
             x0, y0, x1, y1 = grid.bounds  # the first real plan then costs what later ones do
             warm = f", warm-up plan {sd.warm_up((0.5 * (x0 + x1), 0.5 * (y0 + y1))):.0f} ms"
         elif p.method == "astar":
@@ -233,10 +239,19 @@ class GlobalPlanner(ManagedNode):
 
             built["astar"] = planner_for(grid, clearance_for_footprint(self.judged))
         else:
-            built["fd"] = self._build_fd(grid)
+            built["fd"] = self._build_fd(grid, learnt)
         had_goal = self.goal is not None
-        self._sd, self._dense = built.get("sd"), None
-        self.planning.set_map(grid, **built)
+        self._sd, self._dense, self._site = built.get("sd"), None, learnt
+        self.map_changed = changed
+        self.planning.set_map(grid, **built, learnt=learnt)
+        if learnt is not grid:
+            log = self.get_logger().warning if changed > p.map_change_warn else \
+                self.get_logger().info
+            log(f"map updated: {100 * changed:.2f}% of its cells changed since the map the "
+                f"models learnt ({int(self.planning.memory.unlearnt.sum())} new wall cells, "
+                f"detoured when SD crosses them)"
+                + (f"; above map_change_warn ({100 * p.map_change_warn:g}%): consider "
+                   f"training again" if changed > p.map_change_warn else ""))
         self._map_time = self._now()
         ms = (time.perf_counter() - t0) * 1e3
         spacing = self.planning.replan_spacing
@@ -249,22 +264,24 @@ class GlobalPlanner(ManagedNode):
         if had_goal:
             self._step()  # plan again on the new map
 
-    def _build_sd(self, grid) -> SparseDiffusion:
+    def _build_sd(self, grid, learnt) -> SparseDiffusion:
+        """SD on ``grid`` with the model of ``learnt`` (the site's map; ``grid`` or an earlier
+        version of it)."""
         from ecahd_core.model_zoo import load_model
 
         p = self.params
-        ckpt = load_model("sd", grid, path=p.sd_model or None, footprint=self.footprint,
+        ckpt = load_model("sd", learnt, path=p.sd_model or None, footprint=self.footprint,
                           horizon=p.horizon)
         cost = (collision_cost(p, grid, self.footprint)
                 if p.selection == "collision_aware" else None)
         return SparseDiffusion(ckpt, p.sparse_config(), cost=cost)
 
-    def _build_fd(self, grid):
+    def _build_fd(self, grid, learnt):
         from ecahd_core.model_zoo import load_model
         from ecahd_core.planning.full import FullDiffusion
 
         p = self.params
-        ckpt = load_model("fd", grid, path=p.fd_model or None, footprint=self.footprint)
+        ckpt = load_model("fd", learnt, path=p.fd_model or None, footprint=self.footprint)
         cost = collision_cost(p, grid, self.footprint) if p.fd_guidance else None
         return FullDiffusion(ckpt, guidance=p.fd_guidance, cost=cost,
                              num_steps=p.ddim_steps or None)
@@ -433,7 +450,8 @@ class GlobalPlanner(ManagedNode):
                             f"{p.method!r}")
         if self._dense is None:  # the DD model and the net, once per map
             self._dense = DensePathPlanner.for_map(self.grid, self.footprint, self._sd,
-                                                   dd_model=p.dd_model or None)
+                                                   dd_model=p.dd_model or None,
+                                                   learnt=self._site)
         return self._dense.plan(start, goal,
                                 generator=torch.Generator().manual_seed(p.seed))
 
@@ -446,6 +464,7 @@ class GlobalPlanner(ManagedNode):
             if p.method != "astar" else "A*",
             "map": planning.grid.name if planning.grid is not None else "none",
             "map_age_s": self._now() - self._map_time if self._map_time is not None else math.nan,
+            "map_changed_share": self.map_changed,
             "goal": "none" if goal is None else f"{goal[0]:.2f}, {goal[1]:.2f}",
             "plans": self._plans, "plan_ms_p50": self._plan_ms.quantile(0.5),
             "plan_ms_p99": self._plan_ms.quantile(0.99), "fallbacks": planning.fallbacks,

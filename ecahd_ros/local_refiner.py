@@ -87,6 +87,7 @@ from visualization_msgs.msg import MarkerArray
 
 from ecahd_core.errors import EcahdError
 from ecahd_core.frames import FrameError
+from ecahd_core.model_zoo import learnt_map
 from ecahd_core.planning.local import LocalRunner, SegmentResult, judge_items
 from ecahd_core.planning.dense import DenseConfig, DenseStage
 from ecahd_core.sensing import PoseHistory
@@ -143,6 +144,8 @@ class LocalRefiner(ManagedNode):
         set_torch_threads(p.torch_threads)
         self.generator = torch.Generator().manual_seed(p.seed)
         self.grid = None
+        self._site = None  # the map the DD model was loaded for (updates of it keep it)
+        self.map_changed = 0.0  # share of the map's cells changed since the model's map
         self.planner = None  # DenseStage (the local stage) once a map arrives
         self._lock = threading.Lock()  # the runner is shared by the callback threads
         self._world_lock = threading.Lock()  # the local costmap: scan worker vs publisher
@@ -251,7 +254,9 @@ class LocalRefiner(ManagedNode):
         from ecahd_core.planning.local import SegmentRefiner
 
         p = self.params
-        ckpt = (load_model("dd", grid, path=p.dd_model or None, footprint=self.footprint)
+        # with a model, an update of the site's map keeps it (MapError: another extent)
+        learnt, changed = learnt_map(self._site, grid) if p.dd_enabled else (grid, 0.0)
+        ckpt = (load_model("dd", learnt, path=p.dd_model or None, footprint=self.footprint)
                 if p.dd_enabled else None)
         cost = collision_cost(p, grid, self.footprint)
         # Algorithm 1's local stage, the offline planner's own (DenseStage)
@@ -270,6 +275,12 @@ class LocalRefiner(ManagedNode):
                                mark_moving=p.mark_moving_obstacles,
                                shuttles=p.monitor_shuttles)
         self._map_time = self._now()
+        self._site, self.map_changed = learnt, changed
+        if learnt is not grid and changed > p.map_change_warn:
+            self.get_logger().warning(
+                f"map updated: {100 * changed:.2f}% of its cells changed since the map the DD "
+                f"model learnt (map_change_warn {100 * p.map_change_warn:g}%): J, DD's guidance "
+                "and the exact checker use the new map; consider training again")
         with self._lock, self._world_lock:
             self.grid, self.planner, self.refiner, self.world = grid, planner, refiner, world
             self.runner.refine = refiner
@@ -495,6 +506,7 @@ class LocalRefiner(ManagedNode):
             self.runner.close()
         self.destroy_made()
         self.runner = self.params = self.tf = self.world = self.planner = self.grid = None
+        self._site = None
 
     def destroy_node(self) -> None:
         self.release()
@@ -510,6 +522,7 @@ class LocalRefiner(ManagedNode):
         values = {
             "map": self.grid.name if self.grid is not None else "none",
             "map_age_s": self._now() - self._map_time if self._map_time is not None else math.nan,
+            "map_changed_share": self.map_changed,
             "dd": ("ready" if self.planner is not None and self.planner.dd is not None
                    else "disabled" if not p.dd_enabled else "loading"),
             "plan_points": 0 if waypoints is None else len(waypoints),

@@ -168,6 +168,11 @@ SHARED = {spec.name: spec for spec in [
                                    "polishing, SD's collision-aware selection); -1 = by the "
                                    "map: 0.5 on maps over 50 000 cells (a building's speckle "
                                    "is then visible to J), else 0.1 (the paper's tables)"),
+    ParamSpec("map_change_warn", 0.05, "an updated map of the same site (same cells, "
+                                       "resolution and origin: a SLAM update) keeps the "
+                                       "site's models; more than this share of its cells "
+                                       "changed is warned about (the models learnt the old "
+                                       "map: consider training again)"),
     ParamSpec("dd_model", "", "DD checkpoint path; '' = the shipped model for map_name "
                               "(global_planner: compute_path_to_pose's dense path)"),
     ParamSpec("seed", 0, "seed of the sampler's torch.Generator (a seed reproduces the plans)"),

@@ -624,3 +624,49 @@ def test_a_configuration_that_fails_under_a_manager_keeps_the_node(rig):
     assert r.planner.planning is None and not r.planner.active
     assert r.planner._state_machine.current_state[1] == "unconfigured"
     assert "spaceship" in (r.planner._configure_error or "")
+
+
+def blocked_update(grid, x0: float, x1: float, y0: float, y1: float):
+    """``grid`` (a GridMap) with the box [x0, x1] x [y0, y1] [m] occupied: an updated map of the
+    same site (a SLAM update, an edited map)."""
+    from ecahd_core.maps import GridMap
+
+    data = grid.data.copy()
+    (r0, c0), (r1, c1) = grid.world_to_cell((x0, y0)), grid.world_to_cell((x1, y1))
+    data[min(r0, r1):max(r0, r1) + 1, min(c0, c1):max(c0, c1) + 1] = 100
+    return GridMap(data, grid.resolution, grid.origin, name=grid.name, frame_id=grid.frame_id)
+
+
+def test_an_updated_map_of_the_site_keeps_the_model_and_is_planned_round(rig):
+    """A map update with a box across the y = 5.5 corridor (walls SD never learnt): the node
+    keeps the site's model, records the share of changed cells, plans the active goal again at
+    once, and the plan goes round the box (the straight way stays on y ~ 5.5) without touching
+    the new map (exact checker). A map of another extent is refused and the old one kept."""
+    from ecahd_core.collision import check_collision
+
+    r = rig()
+    site = builtin_map("maze2d-large")
+    start, goal = (1.5, 5.5), (5.5, 5.5)
+    r.send_map()
+    r.send_odom(start)
+    r.spin_until(lambda: r.planner.ready and r.planner.pose is not None)
+    r.send_goal(goal)
+    r.spin_until(lambda: r.plans)
+    updated = blocked_update(site, 3.5, 4.0, 5.0, 6.0)
+    n = len(r.plans)
+    r._matched(r.map_pub, grid_to_msg(updated))
+    r.spin_until(lambda: len(r.plans) > n)
+    assert r.planner.grid.fingerprint() == updated.fingerprint()
+    assert r.planner.map_changed == pytest.approx(float(np.mean(updated.occupied
+                                                               != site.occupied)))
+    assert r.planner.planning.memory.unlearnt.sum() == (updated.occupied & ~site.occupied).sum()
+    path = path_to_xy(r.plans[-1])
+    assert np.allclose(path[0], start) and np.allclose(path[-1], goal)
+    assert np.abs(path[:, 1] - 5.5).max() > 1.0  # round the box through another corridor
+    assert check_collision(path, r.planner.footprint, updated).collision_free
+    # another extent (maze2d-medium's cells): refused with the reason, the update kept
+    n = len(r.plans)
+    r._matched(r.map_pub, grid_to_msg(builtin_map("maze2d-medium")))
+    r.spin_for(1.0)
+    assert r.planner.grid.fingerprint() == updated.fingerprint()
+    assert len(r.plans) == n

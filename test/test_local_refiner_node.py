@@ -420,3 +420,31 @@ def test_deactivated_it_stops_the_robot_and_stops_commanding(rig):
     assert r.node.trigger_deactivate() == TransitionCallbackReturn.SUCCESS
     assert r.node.trigger_cleanup() == TransitionCallbackReturn.SUCCESS
     assert r.node.runner is None and r.node.params is None
+
+
+def test_an_updated_map_of_the_site_keeps_dd_and_j_sees_its_new_walls(rig):
+    """A map update with a box across the y = 5.5 corridor: the node keeps the site's DD model,
+    records the share of changed cells, and J judges a straight segment through the box on the
+    new map (DD refines it); a map of another extent is refused and the update kept."""
+    from ecahd_core.maps import GridMap
+
+    r = rig(footprint=SMALL_ROBOT)
+    r.send_map()
+    site = builtin_map("maze2d-large")
+    data = site.data.copy()
+    data[50:60, 35:40] = 100  # x in [3.5, 4.0], y in [5.0, 6.0]: wall to wall
+    updated = GridMap(data, site.resolution, site.origin, name=site.name)
+    r.map_pub.publish(grid_to_msg(updated))
+    r.spin_until(lambda: r.node.grid.fingerprint() == updated.fingerprint())
+    assert r.node.planner.dd is not None  # the site's model kept
+    assert r.node.map_changed == pytest.approx(50 / data.size)
+    r.send_odom(2.5, 5.5, 0.0)
+    r.send_plan([(2.5, 5.5), (4.5, 5.5)])  # straight through the new box
+    r.spin_until(lambda: r.segment_timings())
+    timing = r.segment_timings()[-1]
+    assert timing["c_before"] > 0.1 and timing["stage"] == "dd"
+    r.map_pub.publish(grid_to_msg(builtin_map("maze2d-medium")))  # another extent: refused
+    deadline = time.monotonic() + 1.0
+    while time.monotonic() < deadline:
+        r.executor.spin_once(timeout_sec=0.01)
+    assert r.node.grid.fingerprint() == updated.fingerprint()

@@ -180,3 +180,30 @@ def test_crop_keeps_the_lattice_and_clips_to_the_map():
     assert clipped.origin == pytest.approx((1.0, 2.0)) and clipped.data.shape == (3, 5)
     with pytest.raises(MapError, match="off the map"):
         grid.crop(50, 50, 60, 60)
+
+
+def test_changed_share_of_an_update_and_another_extent_named():
+    """An update of the same site (same cells, resolution, origin): the share of cells whose
+    obstacle state changed; a map of another extent: MapError naming both."""
+    from ecahd_core.footprint import make_footprint
+    from ecahd_core.sensing import ObstacleMemory
+
+    site = builtin_map("maze2d-large")
+    data = site.data.copy()
+    data[50:60, 35:40] = 100  # 50 free cells walled
+    data[0, 0] = 0  # one wall cell opened
+    updated = GridMap(data, site.resolution, site.origin, name="update")
+    assert site.changed_share(site) == 0.0
+    assert updated.changed_share(site) == site.changed_share(updated) == 51 / data.size
+    with pytest.raises(MapError, match="not an update of 'maze2d-large'"):
+        site.changed_share(builtin_map("maze2d-medium"))
+    moved = GridMap(site.data, site.resolution, (0.5, 0.0), name="moved")
+    with pytest.raises(MapError, match=r"\(0.5, 0.0\)"):
+        site.changed_share(moved)
+    # the memory keeps the new walls for good: only those (not the opened cell)
+    memory = ObstacleMemory(updated, persistence=1.0)
+    assert memory.learnt_from(site) == 50
+    assert memory.mask(now=1e6).sum() == 50
+    robot = make_footprint("circle")
+    assert memory.crosses(np.array([[2.5, 5.5], [4.5, 5.5]]), robot, now=1e6)
+    assert not memory.crosses(np.array([[1.5, 1.5], [2.5, 1.5]]), robot, now=1e6)

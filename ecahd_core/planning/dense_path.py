@@ -48,16 +48,17 @@ class DensePathPlanner:
 
     @classmethod
     def for_map(cls, grid, footprint, sd, *, dd_model: str | None = None,
-                padding: float = 0.0) -> "DensePathPlanner":
+                padding: float = 0.0, learnt=None) -> "DensePathPlanner":
         """On ``grid`` for ``footprint`` over ``sd`` (a SparseDiffusion for the map, its cost J
         set): the map's DD model (``dd_model``: a path; None: the shipped one; CheckpointError
-        when there is none) and the net with A*'s ``padding`` [m]."""
+        when there is none; ``learnt``: the site's map the model learnt when ``grid`` is an
+        update of it) and the net with A*'s ``padding`` [m]."""
         from ecahd_core.planning.hierarchical import HierarchicalPlanner
         from ecahd_core.safety import SafetyNet, SafetyNetConfig
 
         if sd.cost is None:
             raise PlanningError("a dense path needs SD with its collision cost J")
-        hd = HierarchicalPlanner.for_map(grid, footprint, sd, model=dd_model)
+        hd = HierarchicalPlanner.for_map(grid, footprint, sd, model=dd_model, learnt=learnt)
         return cls(hd, SafetyNet(grid, footprint, SafetyNetConfig(padding=padding), planner=hd))
 
     @property

@@ -149,7 +149,7 @@ class HierarchicalPlanner(DenseStage):
                 replan: str = "every_waypoint", replan_spacing: float | None = None,
                 exact: bool = True, backtracks: int = BACKTRACKS, subgoals: bool = True,
                 settle: bool = True, model: str | None = None,
-                device: str = "cpu") -> "HierarchicalPlanner":
+                device: str = "cpu", learnt=None) -> "HierarchicalPlanner":
         """Algorithm 1 on ``grid`` for ``footprint`` over ``sd`` (``SparseDiffusion.for_map``)
         as ``ecahd plan`` and the benchmarks build it: the map's DD model (``model``: a path),
         J from ``sd.cost``, the re-plans' spacing by the map and the model (``replan_spacing``
@@ -158,7 +158,8 @@ class HierarchicalPlanner(DenseStage):
         from ecahd_core.model_zoo import load_model
         from ecahd_core.planning.horizon import replan_spacing_for
 
-        return cls(sd, load_model("dd", grid, path=model, footprint=footprint),
+        return cls(sd, load_model("dd", learnt if learnt is not None else grid, path=model,
+                                  footprint=footprint),
                    costmap=sd.cost.costmap, footprint_points=sd.cost.footprint_points,
                    cost_config=sd.cost.config,
                    dense=dense, device=device, replan=replan,

@@ -357,17 +357,21 @@ class OnlinePlanner:
     def replan_spacing(self) -> float | None:
         return self.runner.config.replan_spacing
 
-    def set_map(self, grid, *, sd=None, astar=None, fd=None) -> None:
+    def set_map(self, grid, *, sd=None, astar=None, fd=None, learnt=None) -> None:
         """A new map with the planner of ``method`` built on it (``sd``: a SparseDiffusion
         without a placer; ``astar``: an AStarPlanner with the footprint's clearance; ``fd``: a
         FullDiffusion). Builds the placers and the subgoal rule's graph now, so no re-plan pays
-        for them; an active goal is planned again."""
+        for them; an active goal is planned again. ``learnt``: the map of this site the models
+        learnt when ``grid`` is an update of it: walls added since are treated as a scanned
+        blockage that never leaves (SD's plans crossing one are detoured by A*)."""
         from ecahd_core.placement import auto_reach
         from ecahd_core.sensing import ObstacleMemory
 
         c = self.config
         self.grid, self._placers = grid, {}
         self.memory = ObstacleMemory(grid, c.obstacle_memory)
+        if learnt is not None and learnt is not grid:
+            self.memory.learnt_from(learnt)
         self.astar, self.fd, self.stage = astar, fd, None
         spacing = c.spacing_on(grid, sd.expert_spacing) if sd is not None else None
         self.runner.config = replace(self.runner.config, replan_spacing=spacing)
