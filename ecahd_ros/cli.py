@@ -4,6 +4,7 @@
     ecahd map       describe a map, export it as Nav2 YAML + PGM, draw it
     ecahd dataset   generate A* expert data for training
     ecahd train     train one diffusion model;  ecahd train-all: a map's dataset and all models
+    ecahd train-general   the generalist SD that reads the map, on many generated buildings
     ecahd bench     benchmarks (cost, sampling, sd-quality, planning; navigation: Table III in
                     closed loop, the one that needs rclpy)
     ecahd demo      the closed loop in simulation, recorded and scored;  ecahd eval-bag: score a bag
@@ -28,6 +29,9 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "train": ("ecahd_core.commands.train", "train one diffusion model (sd, dd, fd) on a dataset"),
     "train-all": ("ecahd_core.commands.train:all",
                   "dataset + all models of a map, seeded (reproduces the shipped models)"),
+    "train-general": ("ecahd_core.commands.train_general",
+                      "the generalist map-conditioned SD on many generated buildings "
+                      "(resumable)"),
     "demo": ("ecahd_ros.demo",
              "run the ROS 2 graph through seeded goals, record a bag and score it (Table III)"),
     "eval-bag": ("ecahd_ros.eval_bag",

@@ -329,17 +329,30 @@ def load_checkpoint(path: str | os.PathLike, *, expect: Mapping[str, Any] | None
         CheckpointError: missing or unreadable file, another format or version, or a mismatch.
     """
     path = Path(path)
-    if not path.is_file():
-        raise CheckpointError(f"checkpoint '{path}' does not exist or is not a file")
-    try:
-        payload = torch.load(path, map_location=map_location, weights_only=True)
-    except Exception as exc:  # torch.load raises many types (zip, pickle, EOF, unsafe content)
-        raise CheckpointError(f"cannot read checkpoint '{path}' (corrupt, truncated or not a "
-                              f"torch file): {type(exc).__name__}: {exc}") from exc
+    payload = read_checkpoint_file(path, map_location=map_location)
     checkpoint = Checkpoint.from_dict(payload, source=path)
     if expect:
         checkpoint.check(expect)
     return checkpoint
+
+
+def read_checkpoint_file(path: str | os.PathLike, *,
+                         map_location: torch.device | str = "cpu") -> Any:
+    """The plain data of a checkpoint file (``torch.load(weights_only=True)``).
+
+    Raises:
+        CheckpointError: one line naming the file: missing, unreadable, truncated or not a
+            torch file.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f"checkpoint '{path}' does not exist or is not a file")
+    try:
+        return torch.load(path, map_location=map_location, weights_only=True)
+    except Exception as exc:  # torch.load raises many types (zip, pickle, EOF, unsafe content)
+        first = (str(exc).strip().splitlines() or [""])[0]  # unpickling errors run to pages
+        raise CheckpointError(f"cannot read checkpoint '{path}' (corrupt, truncated or not a "
+                              f"torch file): {type(exc).__name__}: {first}") from exc
 
 
 def _plain(value: Any) -> Any:
@@ -396,8 +409,9 @@ def _init_distributed(device: torch.device) -> _DistInfo:
     return _DistInfo(dist.get_rank(), dist.get_world_size(), local, True)
 
 
-def _seed_for(seed: int, step: int, stream: int) -> int:
-    """A generator seed per (run seed, step, stream); stream 0 is shared by all ranks."""
+def step_seed(seed: int, step: int, stream: int) -> int:
+    """A generator seed per (run seed, step, stream); stream 0 is shared by all ranks (also
+    ``ecahd_core.general.train``'s)."""
     return ((seed * 1_000_003 + step) * 1_000_033 + stream) & 0x7FFF_FFFF_FFFF_FFFF
 
 
@@ -428,7 +442,7 @@ def _prepare_data(arrays: Mapping[int, Any], normalizer: Normalizer, max_horizon
 
 
 @torch.no_grad()
-def _ema_update(ema: nn.Module, model: nn.Module, decay: float) -> None:
+def ema_update(ema: nn.Module, model: nn.Module, decay: float) -> None:
     torch._foreach_lerp_(list(ema.parameters()), [p.detach() for p in model.parameters()],
                          1.0 - decay)
     for b_ema, b in zip(ema.buffers(), model.buffers()):
@@ -531,9 +545,9 @@ def _train(model_config: DenoiserConfig, arrays: Mapping[int, Any], normalizer: 
         return Checkpoint(
             kind=kind, model_config=model_config, schedule_config=cfg.schedule,
             normalizer=normalizer, conditioned_indices=cond_indices, horizons=horizons,
-            ema_state_dict=_cpu_state(ema.state_dict()), step=step, meta=meta,
+            ema_state_dict=cpu_state(ema.state_dict()), step=step, meta=meta,
             train_config=cfg.to_dict(), loss_history=tuple(history),
-            training_state={"model_state_dict": _cpu_state(model.state_dict()),
+            training_state={"model_state_dict": cpu_state(model.state_dict()),
                             "optimizer_state_dict": optimizer.state_dict(),
                             "lr_scheduler_state_dict": lr_schedule.state_dict()})
 
@@ -548,8 +562,8 @@ def _train(model_config: DenoiserConfig, arrays: Mapping[int, Any], normalizer: 
     model.train()
     n_updates, t_loop = start_step, time.perf_counter()
     for step in range(start_step, cfg.steps):
-        shared_gen.manual_seed(_seed_for(cfg.seed, step, 0))
-        local_gen.manual_seed(_seed_for(cfg.seed, step, 1 + rank))
+        shared_gen.manual_seed(step_seed(cfg.seed, step, 0))
+        local_gen.manual_seed(step_seed(cfg.seed, step, 1 + rank))
         # 1. horizon ~ dataset sizes (same on every rank), batch from this rank's shard
         h = learnable[int(torch.multinomial(sizes, 1, generator=shared_gen))]
         shard = data[h]
@@ -573,7 +587,7 @@ def _train(model_config: DenoiserConfig, arrays: Mapping[int, Any], normalizer: 
         optimizer.step()
         lr_schedule.step()
         n_updates = step + 1
-        _ema_update(ema, model, min(cfg.ema_decay, (1 + n_updates) / (10 + n_updates)))
+        ema_update(ema, model, min(cfg.ema_decay, (1 + n_updates) / (10 + n_updates)))
 
         window_loss += loss.detach()
         window_n += 1
@@ -634,7 +648,7 @@ def _out_of_time(cfg: TrainConfig, n_updates: int, start_step: int, t_loop: floa
     return stop
 
 
-def _cpu_state(state: Mapping[str, Tensor]) -> dict[str, Tensor]:
+def cpu_state(state: Mapping[str, Tensor]) -> dict[str, Tensor]:
     return {k: v.detach().to("cpu", copy=True) for k, v in state.items()}
 
 

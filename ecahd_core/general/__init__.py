@@ -9,4 +9,9 @@ and plans on buildings it never saw.
   plan).
 - :mod:`~ecahd_core.general.data`: the generalist dataset (generated maps of every family x A*
   expert problems, stored as views + waypoints in view coordinates, in resumable shards).
+- :mod:`~ecahd_core.general.train`: its training (batches of K maps x M problems, the global
+  CNN once per distinct view; the 8 symmetries of the square; resumable bit for bit), behind
+  ``ecahd train-general``.
+- :mod:`~ecahd_core.general.checkpoint`: the generalist checkpoint (model and view config, EMA
+  weights, training state).
 """

@@ -334,32 +334,64 @@ class GeneralDataset:
     @classmethod
     def load(cls, directory: str | os.PathLike) -> "GeneralDataset":
         """All finished shards of ``directory``; DatasetError naming a bad or foreign file."""
-        directory = Path(directory)
-        paths = sorted(directory.glob(SHARD_GLOB))
-        if not paths:
-            raise DatasetError(f"{str(directory)!r} holds no generalist shards ({SHARD_GLOB})")
-        parts, maps, config_json = [], [], None
-        for path in paths:
-            try:
-                with np.load(path, allow_pickle=False) as npz:
-                    if int(npz["version"]) != GENERAL_DATA_VERSION:
-                        raise DatasetError(f"{str(path)!r} is generalist data version "
-                                           f"{int(npz['version'])}; this code reads "
-                                           f"{GENERAL_DATA_VERSION}")
-                    cj = str(npz["config_json"])
-                    if config_json is not None and cj != config_json:
-                        raise DatasetError(f"{str(path)!r} was built with another config than "
-                                           f"{str(paths[0])!r}")
-                    config_json = cj
-                    maps += json.loads(str(npz["maps_json"]))
-                    parts.append({name: npz[name] for name in SHARD_ARRAYS})
-            except DatasetError:
-                raise
-            except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
-                raise DatasetError(f"generalist shard {str(path)!r} is corrupt: {exc}") from exc
-        d = json.loads(config_json)
-        config = GeneralDataConfig(**{**d, "sizes": tuple(d["sizes"])})
+        parts, maps, config = [], [], None
+        for shard in iter_shards(directory):
+            parts.append(shard.arrays)
+            maps += shard.maps
+            config = shard.config
         return cls(**{name: np.concatenate([p[name] for p in parts]) for name in SHARD_ARRAYS},
                    maps=maps, config=config)
 
 
+@dataclass(frozen=True)
+class Shard:
+    """One shard file as :func:`iter_shards` reads it.
+
+    Attributes:
+        path: the file.
+        arrays: ``SHARD_ARRAYS`` (module docstring), N rows each.
+        maps: its per-map records.
+        config: the builder's config (the same for every shard of a directory).
+    """
+
+    path: Path
+    arrays: dict[str, np.ndarray]
+    maps: list[dict]
+    config: GeneralDataConfig
+
+
+def iter_shards(directory: str | os.PathLike):
+    """The finished shards of ``directory`` one at a time, in order (a large dataset need not
+    be held whole: ``general.train`` keeps its global views once per distinct view).
+
+    Raises:
+        DatasetError: no shards, or one naming a corrupt file, another version or another
+            config than the first shard's.
+    """
+    directory = Path(directory)
+    paths = sorted(directory.glob(SHARD_GLOB))
+    if not paths:
+        raise DatasetError(f"{str(directory)!r} holds no generalist shards ({SHARD_GLOB})")
+    config_json, config = None, None
+    for path in paths:
+        try:
+            with np.load(path, allow_pickle=False) as npz:
+                if int(npz["version"]) != GENERAL_DATA_VERSION:
+                    raise DatasetError(f"{str(path)!r} is generalist data version "
+                                       f"{int(npz['version'])}; this code reads "
+                                       f"{GENERAL_DATA_VERSION}")
+                cj = str(npz["config_json"])
+                if config_json is not None and cj != config_json:
+                    raise DatasetError(f"{str(path)!r} was built with another config than "
+                                       f"{str(paths[0])!r}")
+                if config_json is None:
+                    d = json.loads(cj)
+                    config = GeneralDataConfig(**{**d, "sizes": tuple(d["sizes"])})
+                config_json = cj
+                maps = json.loads(str(npz["maps_json"]))
+                arrays = {name: npz[name] for name in SHARD_ARRAYS}
+        except DatasetError:
+            raise
+        except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile) as exc:
+            raise DatasetError(f"generalist shard {str(path)!r} is corrupt: {exc}") from exc
+        yield Shard(path=path, arrays=arrays, maps=maps, config=config)

@@ -123,15 +123,28 @@ class GeneralDenoiserConfig(DenoiserConfig):
 class ViewTensors:
     """A batch of views as the model reads them.
 
+    Problems that share a global view (every problem of a map with the default "map" extent)
+    may share one row of ``global_view``: ``global_index`` maps each problem to its row, and
+    :meth:`MapConditionedDenoiser.encode` runs the global CNN once per row (training batches
+    of K maps x M problems, ``ecahd_core.general.train``).
+
     Attributes:
-        global_view: (Bm, C, S, S) float.
+        global_view: (U, C, S, S) float; U = Bm without ``global_index``.
         local_views: (Bm, 2, C, S_l, S_l) float (start, goal).
-        half_side: (Bm,) float [m], the global view's half side.
+        half_side: (U,) float [m], the global view's half side (a property of the global view).
+        global_index: (Bm,) long in 0..U-1, problem -> its global view's row; None: row i is
+            problem i.
     """
 
     global_view: Tensor
     local_views: Tensor
     half_side: Tensor
+    global_index: Tensor | None = None
+
+    @property
+    def batch(self) -> int:
+        """Bm, the problems."""
+        return int(self.local_views.shape[0])
 
     @classmethod
     def from_views(cls, views: MapViews, device: torch.device | str = "cpu") -> "ViewTensors":
@@ -209,7 +222,10 @@ class MapConditionedDenoiser(TransformerDenoiser):
         """The map memory of Bm problems' views (once per plan; pass it to every step).
 
         Args:
-            views: :class:`ViewTensors` (or numpy :class:`MapViews`), batch Bm.
+            views: :class:`ViewTensors` (or numpy :class:`MapViews`), batch Bm; with a
+                ``global_index`` the global CNN runs once per distinct global view (U rows)
+                and its tokens are gathered for each problem: the same memory as with the U
+                views repeated per problem, at U / Bm of the global CNN's cost.
         Returns:
             :class:`MapMemory`, keys and values (Bm, n_heads, M, d / n_heads) per layer.
         """
@@ -217,24 +233,45 @@ class MapConditionedDenoiser(TransformerDenoiser):
         if isinstance(views, MapViews):
             views = ViewTensors.from_views(views, device)
         cfg = self.config
-        g, loc, half = views.global_view, views.local_views, views.half_side
-        Bm = g.shape[0]
+        g, loc, half, index = views.global_view, views.local_views, views.half_side, \
+            views.global_index
+        Bm, U = loc.shape[0], g.shape[0]
         C, S, Sl = cfg.view.channels, cfg.view.global_size, cfg.view.local_size
-        if g.shape != (Bm, C, S, S) or loc.shape != (Bm, 2, C, Sl, Sl) or half.shape != (Bm,):
-            raise ValueError(f"views must be global (Bm, {C}, {S}, {S}), local (Bm, 2, {C}, "
-                             f"{Sl}, {Sl}) and half_side (Bm,); got {tuple(g.shape)}, "
+        if g.shape != (U, C, S, S) or loc.shape != (Bm, 2, C, Sl, Sl) or half.shape != (U,):
+            raise ValueError(f"views must be global (U, {C}, {S}, {S}), local (Bm, 2, {C}, "
+                             f"{Sl}, {Sl}) and half_side (U,); got {tuple(g.shape)}, "
                              f"{tuple(loc.shape)}, {tuple(half.shape)}")
-        pg = self.global_encoder.feature_map(g.to(device))  # (Bm, Cg, 8, 8)
+        if index is None and U != Bm:
+            raise ValueError(f"{U} global views for {Bm} problems need a global_index")
+        if index is not None and (index.shape != (Bm,) or index.dtype != torch.long):
+            raise ValueError(f"global_index must be a (Bm,) = ({Bm},) long tensor, got "
+                             f"{tuple(index.shape)} {index.dtype}")
+        pg = self.global_encoder.feature_map(g.to(device))  # (U, Cg, 8, 8)
         patches = self.global_encoder.proj(pg.flatten(2).transpose(1, 2)) \
-            + self.global_pos  # (Bm, 64, d)
+            + self.global_pos  # (U, 64, d)
+        scale = self.scale_embed(half.to(device).float().clamp_min(1e-3).log()[:, None])
         pl = self.local_encoder.feature_map(loc.to(device).flatten(0, 1))  # (2Bm, Cl, 4, 4)
         pl = nn.functional.adaptive_avg_pool2d(pl, cfg.local_grid)  # (2Bm, Cl, Sg, Sg)
         local = self.local_encoder.proj(pl.flatten(2).transpose(1, 2))  # (2Bm, Sg^2, d)
         local = local.reshape(Bm, 2 * cfg.local_grid ** 2, -1) + self.local_pos  # (Bm, 2Sg^2, d)
-        scale = self.scale_embed(half.to(device).float().clamp_min(1e-3).log()[:, None])
-        memory = self.memory_norm(torch.cat([patches, local, scale[:, None]], dim=1))  # (Bm,M,d)
-        kv = [layer.keys_values(memory) for layer in self.cross]
-        return MapMemory(keys=tuple(k for k, _ in kv), values=tuple(v for _, v in kv))
+        if index is None:
+            memory = self.memory_norm(torch.cat([patches, local, scale[:, None]], dim=1))
+            kv = [layer.keys_values(memory) for layer in self.cross]  # (Bm, heads, M, d_h)
+            return MapMemory(keys=tuple(k for k, _ in kv), values=tuple(v for _, v in kv))
+        # the norm and K, V are per token: those of the global tokens (patches, scale) are
+        # computed once per global view, then gathered per problem in the memory's order
+        n_patch = patches.shape[1]
+        shared = self.memory_norm(torch.cat([patches, scale[:, None]], dim=1))  # (U, 65, d)
+        own = self.memory_norm(local)  # (Bm, 2Sg^2, d)
+        index = index.to(device)
+        keys, values = [], []
+        for layer in self.cross:
+            kg, vg = layer.keys_values(shared)  # (U, heads, 65, d_h)
+            kl, vl = layer.keys_values(own)  # (Bm, heads, 2Sg^2, d_h)
+            kg, vg = kg.index_select(0, index), vg.index_select(0, index)  # (Bm, heads, 65, d_h)
+            keys.append(torch.cat([kg[:, :, :n_patch], kl, kg[:, :, n_patch:]], dim=2))
+            values.append(torch.cat([vg[:, :, :n_patch], vl, vg[:, :, n_patch:]], dim=2))
+        return MapMemory(keys=tuple(keys), values=tuple(values))  # (Bm, heads, M, d_h) each
 
     def forward(self, x: Tensor, t: Tensor | int, *, views: ViewTensors | MapViews | None = None,
                 memory: MapMemory | None = None) -> Tensor:
@@ -243,7 +280,8 @@ class MapConditionedDenoiser(TransformerDenoiser):
         Args:
             x: (B, P, 2) noisy trajectories in view coordinates, 2 <= P <= max_horizon.
             t: (B,) long timesteps in 0..K-1 (or an int shared by the batch).
-            views: the problems' views, batch B or 1 (encoded at this call), or
+            views: the problems' views, batch B or 1 (encoded at this call; problems that
+                share a global view may share its row, ``ViewTensors.global_index``), or
             memory: their :meth:`encode` output, batch B or 1 (computed once per plan).
         Returns:
             eps: (B, P, 2).
