@@ -29,6 +29,8 @@ log = logging.getLogger(__name__)
 MODELS_DIR = Path(__file__).resolve().parent / "models"
 MODELS_ENV = "ECAHD_MODELS"
 KINDS = ("sd", "dd", "fd")
+GENERAL = "general"  # SD's model named so: the shipped generalist (issue 40)
+GENERAL_FILES = {"sd": "general_sd.pt", "dd": "general_dd.pt"}  # on the model search path
 DEFAULT_DENSE_POINTS = 4  # P^l of the paper's DD (2 interior points); a DD checkpoint says its own
 
 
@@ -246,6 +248,82 @@ def load_model(kind: str, grid, *, path: str | Path | None = None, footprint=Non
             _check_shipped(kind, grid.name, path)
     ckpt = _read_checkpoint(kind, grid, path, device=device)
     _check_fit(ckpt, path, footprint, horizon)
+    return ckpt
+
+
+def general_path(kind: str = "sd") -> Path:
+    """Where the generalist of ``kind`` ("sd": the map-conditioned SD; "dd": the segment-frame
+    DD) is found on :func:`model_search_path` (the package's own folder when no folder has
+    it)."""
+    name = GENERAL_FILES[kind]
+    for folder in model_search_path():
+        if (folder / name).is_file():
+            return folder / name
+    return MODELS_DIR / name
+
+
+def _general_file(kind: str) -> Path:
+    path = general_path(kind)
+    if not path.is_file():
+        how = "ecahd train-general --ship FILE" if kind == "sd" else "ecahd train-general-dd"
+        raise CheckpointError(f"no generalist {kind.upper()} ({GENERAL_FILES[kind]} in none of "
+                              f"{[str(d) for d in model_search_path()]}); train one with "
+                              f"`{how}`")
+    return path
+
+
+def load_dd(grid, *, path: str | Path | None = None, footprint=None, device: str = "cpu"):
+    """DD's checkpoint for ``grid``: the map's own (:func:`load_model`) or the segment-frame
+    generalist (``general.segment_dd``), which refines segments on any map.
+
+    Args:
+        path: None: the map's shipped DD; ``GENERAL``: the shipped generalist
+            (:func:`general_path`); a file: that checkpoint, per-map or segment-frame by its
+            meta.
+    Raises:
+        CheckpointError naming the file and the problem.
+    """
+    from ecahd_core.diffusion.training import load_checkpoint
+    from ecahd_core.general.segment_dd import is_segment_frame
+
+    if path is None:
+        return load_model("dd", grid, footprint=footprint, device=device)
+    path = _general_file("dd") if str(path) == GENERAL else Path(path)
+    ckpt = load_checkpoint(path, expect={"kind": "dd"}, map_location=device)
+    if not is_segment_frame(ckpt):
+        return load_model("dd", grid, path=path, footprint=footprint, device=device)
+    return ckpt
+
+
+def load_sd(grid, *, path: str | Path | None = None, footprint=None,
+            horizon: int | None = None, device: str = "cpu"):
+    """SD's checkpoint for ``grid``: the map's own model (:func:`load_model`) or the generalist,
+    which plans on any map (``general.GeneralCheckpoint``, for ``SparseDiffusion``).
+
+    Args:
+        path: None: the map's shipped model; ``GENERAL`` ("general"): the shipped generalist
+            (:func:`general_path`); a file: that checkpoint, per-map or generalist by its
+            format.
+        footprint, horizon, device: as :func:`load_model`. The generalist learnt one robot's
+            clearance (its data's ``robot``) and plans for any footprint: J's selection, the
+            placer, DD and the exact checker judge the footprint itself.
+    Raises:
+        CheckpointError naming the file and the problem.
+    """
+    from ecahd_core.diffusion.training import read_checkpoint_file
+    from ecahd_core.general.checkpoint import GENERAL_CHECKPOINT_FORMAT, GeneralCheckpoint
+
+    if path is None:
+        return load_model("sd", grid, footprint=footprint, horizon=horizon, device=device)
+    path = _general_file("sd") if str(path) == GENERAL else Path(path)
+    payload = read_checkpoint_file(path, map_location=device)
+    if not (isinstance(payload, dict) and payload.get("format") == GENERAL_CHECKPOINT_FORMAT):
+        return load_model("sd", grid, path=path, footprint=footprint, horizon=horizon,
+                          device=device)
+    ckpt = GeneralCheckpoint.from_dict(payload, source=path)
+    if horizon is not None and int(horizon) not in ckpt.horizons:
+        raise CheckpointError(f"checkpoint '{path}' was trained for horizons "
+                              f"{list(ckpt.horizons)}, not {horizon}")
     return ckpt
 
 

@@ -5,6 +5,7 @@
     ecahd dataset   generate A* expert data for training
     ecahd train     train one diffusion model;  ecahd train-all: a map's dataset and all models
     ecahd train-general   the generalist SD that reads the map, on many generated buildings
+    ecahd train-general-dd   the generalist DD, in each segment's own frame
     ecahd bench     benchmarks (cost, sampling, sd-quality, planning; navigation: Table III in
                     closed loop, the one that needs rclpy)
     ecahd demo      the closed loop in simulation, recorded and scored;  ecahd eval-bag: score a bag
@@ -32,6 +33,8 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "train-general": ("ecahd_core.commands.train_general",
                       "the generalist map-conditioned SD on many generated buildings "
                       "(resumable)"),
+    "train-general-dd": ("ecahd_core.commands.train_general:dd",
+                         "the generalist DD (in each segment's frame) on generated buildings"),
     "demo": ("ecahd_ros.demo",
              "run the ROS 2 graph through seeded goals, record a bag and score it (Table III)"),
     "eval-bag": ("ecahd_ros.eval_bag",

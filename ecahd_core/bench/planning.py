@@ -107,6 +107,7 @@ class PlanningBenchSettings:
     safety_net: bool = True  # ours: judge HD / ECAHD with and without the net (ecahd_core.safety)
     net_retries: int = 2  # SafetyNetConfig's default
     net_resamples: int = 2  # SafetyNetConfig's default (0: the net skips its resample rule)
+    sd_model: str | None = None  # SD's checkpoint (None: the map's; "general": the generalist)
 
 
 GUIDANCE_RUNS = {"both": (False, True), "on": (True,), "off": (False,)}
@@ -253,7 +254,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                 guidance_space=settings.guidance_space,
                 warm_fraction=settings.warm_fraction, max_spacing=settings.max_spacing,
                 precision=settings.precision, leg_batches=settings.leg_batches),
-                cost=cost, place_reach=settings.place_reach)
+                cost=cost, place_reach=settings.place_reach, model=settings.sd_model)
             if method == "sd":
                 plan_fn = lambda s, g: (sd.plan(s, g, generator=gen).waypoints, None)  # noqa: E731
             else:
@@ -364,6 +365,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                "max_spacing": settings.max_spacing, "place_reach": place_reach,
                "safety_net": settings.safety_net, "net_retries": settings.net_retries,
                "net_resamples": settings.net_resamples,
+               "sd_model": settings.sd_model or "the map's",
                "torch": torch.__version__,
                "threads": torch.get_num_threads()}
     return PlanningBenchResult(cells=cells, ablation=ablation, examples=examples,

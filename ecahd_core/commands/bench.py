@@ -242,6 +242,9 @@ def _add_planning_arguments(parser: argparse.ArgumentParser) -> None:
                         help="run the diffusion methods with and without J's guidance, or only "
                              "one of the two (on: ECAHD's own setting)")
     parser.add_argument("--no-ablation", action="store_true", help="skip Table II")
+    parser.add_argument("--sd-model", metavar="CKPT", default=None,
+                        help="SD's checkpoint: a file (per-map or generalist) or 'general' (the "
+                             "shipped generalist, zero-shot on any map); default: the map's own")
     parser.add_argument("--json", metavar="FILE", help="one record per cell")
     parser.add_argument("--md", metavar="FILE", help="Table I / Table II as markdown")
     parser.add_argument("--png", metavar="FILE", help="one problem planned by every method")
@@ -264,7 +267,7 @@ def _run_planning(args: argparse.Namespace) -> int:
         place_reach=args.place_reach, ablation=not args.no_ablation, precision=args.precision,
         net_resamples=args.net_resamples, replan_spacing=args.replan_spacing,
         guidance=args.guidance, leg_batches=args.leg_batches, backtracks=args.backtracks,
-        subgoals=not args.no_subgoals, settle=not args.no_settle)
+        subgoals=not args.no_subgoals, settle=not args.no_settle, sd_model=args.sd_model)
     result = run_planning_benchmark(settings, progress=not args.no_progress)
     md = format_markdown(result)
     print(md)

@@ -4,6 +4,7 @@ buildings (``ecahd_core.general``).
     ecahd train-general --maps 1000 --minutes 600          # build the data, then train 10 h
     ecahd train-general --resume --minutes 600             # go on from the last checkpoint
     ecahd train-general --data runs/general/data --steps 200 --out /tmp/g.pt
+    ecahd train-general-dd --maps 60 --out general_dd.pt     # the segment-frame DD
 
 ``--maps N`` builds (or finishes building: resumable) the dataset of N maps in ``--data`` first;
 without it ``--data`` must hold a finished dataset. The checkpoint ``--out`` (with training
@@ -118,4 +119,43 @@ def run(args: argparse.Namespace) -> int:
     last = result.loss_history[-1][1] if result.loss_history else float("nan")
     print(f"trained the generalist: step {result.step} (stopped by {result.stopped}), loss "
           f"{last:.4f} -> {result.path}; resume with the same command and --resume")
+    return 0
+
+
+# ------------------------------------------------------------------------- train-general-dd
+def add_dd_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--maps", type=int, default=60, metavar="N",
+                   help="generated maps whose expert segments it learns (the generalist "
+                        "dataset's map schedule; about 2 s a map)")
+    p.add_argument("--data-seed", type=int, default=0, help="the maps' seed (as train-general)")
+    p.add_argument("--pairs", type=int, default=100, help="expert paths per map")
+    p.add_argument("--out", default=str(DEFAULT_DIR / "general_dd.pt"),
+                   help="the inference-only checkpoint")
+    p.add_argument("--steps", type=int, default=None,
+                   help="optimiser steps (default: the per-map DD's recipe)")
+    p.add_argument("--minutes", type=float, default=None, metavar="M",
+                   help="stop training after M minutes")
+    p.add_argument("--seed", type=int, default=0, help="seed of weights and every draw")
+    p.add_argument("--threads", type=int, default=1, help="torch threads")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def run_dd(args: argparse.Namespace) -> int:
+    from ecahd_core.general.segment_dd import build_segment_data, train_segment_dd
+
+    set_torch_threads(args.threads)
+    for name in ("maps", "pairs", "steps", "minutes"):
+        value = getattr(args, name)
+        if value is not None and not value > 0:
+            raise DatasetError(f"--{name} must be > 0, got {value}")
+    data = build_segment_data(args.maps, seed=args.data_seed, pairs_per_map=args.pairs,
+                              progress=not args.no_progress)
+    print(f"segment data: {len(data.segments)} segments (mirrored) of {data.maps} maps, "
+          f"{data.dropped} too short dropped, in {data.seconds:.0f} s", flush=True)
+    t0 = time.perf_counter()
+    result = train_segment_dd(args.out, data, seed=args.seed, steps=args.steps,
+                              minutes=args.minutes, progress=not args.no_progress)
+    last = result.loss_history[-1][1] if result.loss_history else float("nan")
+    print(f"trained the segment-frame DD: {result.checkpoint.step} steps in "
+          f"{time.perf_counter() - t0:.0f} s, loss {last:.4f} -> {args.out}")
     return 0

@@ -334,13 +334,11 @@ class DiffusionSampler:
     def device(self) -> torch.device:
         return _device_of(self.model, self.scheduler)
 
-    def sample(self, *, batch: int, horizon: int, conditions: Mapping[int, Any],
-               generator: torch.Generator | None = None, guide: Guide | None = None,
-               guide_steps: GuideSteps | None = None, return_intermediates: bool = False,
-               model_kwargs: Mapping[str, Any] | None = None, warm_start: Any = None,
-               warm_fraction: float | None = None) -> SampleOutput:
-        """:func:`sample` with this sampler's model and settings. A warm start (``warm_start``
-        (P, 2) or (B, P, 2) [m]) runs the last ``warm_fraction`` (0..1) of the DDIM schedule."""
+    def steps(self, warm_start: Any, warm_fraction: float | None,
+              guide_steps: GuideSteps | None) -> tuple[int | None, GuideSteps | None]:
+        """(warm steps, guided steps) of a call: the last ``warm_fraction`` of the schedule
+        for a warm start (None: all steps from noise), and ``config.guide_last`` as steps
+        where ``guide_steps`` is not given."""
         warm_steps = None
         if (warm_start is None) != (warm_fraction is None):
             raise ValueError("warm_start and warm_fraction go together")
@@ -351,6 +349,16 @@ class DiffusionSampler:
             last = self.config.guide_last  # of the schedule: a warm start may run fewer steps
             last = last if warm_steps is None else min(last, warm_steps)
             guide_steps = set(range(-last, 0)) if last else None
+        return warm_steps, guide_steps
+
+    def sample(self, *, batch: int, horizon: int, conditions: Mapping[int, Any],
+               generator: torch.Generator | None = None, guide: Guide | None = None,
+               guide_steps: GuideSteps | None = None, return_intermediates: bool = False,
+               model_kwargs: Mapping[str, Any] | None = None, warm_start: Any = None,
+               warm_fraction: float | None = None) -> SampleOutput:
+        """:func:`sample` with this sampler's model and settings. A warm start (``warm_start``
+        (P, 2) or (B, P, 2) [m]) runs the last ``warm_fraction`` (0..1) of the DDIM schedule."""
+        warm_steps, guide_steps = self.steps(warm_start, warm_fraction, guide_steps)
         return sample(self.model, self.scheduler, self.normalizer, batch=batch, horizon=horizon,
                       conditions=conditions, num_steps=self.config.num_steps, eta=self.config.eta,
                       generator=generator, guide=guide,

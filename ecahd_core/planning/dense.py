@@ -172,7 +172,10 @@ class DenseStage:
         self.dd = None
         if self.dense.enabled:
             steps = self.dense.num_steps or sample_steps(dense_checkpoint)
-            self.dd = DiffusionSampler.from_checkpoint(
+            from ecahd_core.general.segment_dd import SegmentSampler, is_segment_frame
+
+            sampler = SegmentSampler if is_segment_frame(dense_checkpoint) else DiffusionSampler
+            self.dd = sampler.from_checkpoint(
                 dense_checkpoint, device=device, config=SamplerConfig(
                     num_steps=steps, eta=self.dense.eta,
                     guidance_weight=guidance_weight_for(self.dense.guidance_weight,

@@ -151,15 +151,16 @@ class HierarchicalPlanner(DenseStage):
                 settle: bool = True, model: str | None = None,
                 device: str = "cpu", learnt=None) -> "HierarchicalPlanner":
         """Algorithm 1 on ``grid`` for ``footprint`` over ``sd`` (``SparseDiffusion.for_map``)
-        as ``ecahd plan`` and the benchmarks build it: the map's DD model (``model``: a path),
-        J from ``sd.cost``, the re-plans' spacing by the map and the model (``replan_spacing``
-        None; 0: off; ``horizon.replan_spacing_for``) and the exact rule (``exact``)."""
+        as ``ecahd plan`` and the benchmarks build it: the map's DD model (``model``: a path,
+        per-map or segment-frame; "general": the shipped segment-frame DD), J from
+        ``sd.cost``, the re-plans' spacing by the map and the model (``replan_spacing`` None; 0:
+        off; ``horizon.replan_spacing_for``) and the exact rule (``exact``)."""
         from ecahd_core.collision import exact_check_for
-        from ecahd_core.model_zoo import load_model
+        from ecahd_core.model_zoo import load_dd
         from ecahd_core.planning.horizon import replan_spacing_for
 
-        return cls(sd, load_model("dd", learnt if learnt is not None else grid, path=model,
-                                  footprint=footprint),
+        return cls(sd, load_dd(learnt if learnt is not None else grid, path=model,
+                               footprint=footprint),
                    costmap=sd.cost.costmap, footprint_points=sd.cost.footprint_points,
                    cost_config=sd.cost.config,
                    dense=dense, device=device, replan=replan,

@@ -25,6 +25,7 @@ from ecahd_core.placement import LEG_BATCHES
 # free-first-leg rule (SparseConfig.leg_batches) sends through placement and repair (tens of ms
 # each): on office 2's 32 development plans 0 left 11 colliding, 2 left 4, 4 left 7
 LEG_REPAIRS = 2
+GENERAL_SAMPLE_STEPS = 10  # DDIM steps of the generalist SD (the per-map SD's recipe)
 SELECTION_RULES = ("shortest_reaching", "collision_aware")
 
 
@@ -198,17 +199,29 @@ class SparseDiffusion:
     """
 
     def __init__(self, checkpoint, config: SparseConfig | None = None, *, cost=None,
-                 device: str = "cpu", placer=None) -> None:
+                 device: str = "cpu", placer=None, grid=None) -> None:
         from ecahd_core.diffusion import DiffusionSampler, SamplerConfig
+        from ecahd_core.general.checkpoint import GeneralCheckpoint
         from ecahd_core.model_zoo import sample_steps
 
         self.config = config or SparseConfig()
-        steps = self.config.num_steps or sample_steps(checkpoint)
-        self.sampler = DiffusionSampler.from_checkpoint(
-            checkpoint, device=device, config=SamplerConfig(
-                num_steps=steps, eta=self.config.eta,
-                guidance_weight=self.config.guidance_weight,
-                guidance_space=self.config.guidance_space, precision=self.config.precision))
+        general = isinstance(checkpoint, GeneralCheckpoint)
+        steps = self.config.num_steps or (GENERAL_SAMPLE_STEPS if general
+                                          else sample_steps(checkpoint))
+        sampling = SamplerConfig(num_steps=steps, eta=self.config.eta,
+                                 guidance_weight=self.config.guidance_weight,
+                                 guidance_space=self.config.guidance_space,
+                                 precision=self.config.precision)
+        if general:  # the generalist sees the map: views of ``grid`` round each problem
+            from ecahd_core.general.sampler import GeneralSampler
+
+            if grid is None:
+                raise EcahdError("the generalist SD plans on a map: pass its grid")
+            self.sampler = GeneralSampler(checkpoint, grid, device=device, config=sampling)
+        else:
+            self.sampler = DiffusionSampler.from_checkpoint(checkpoint, device=device,
+                                                            config=sampling)
+        self.general = general
         if cost is None and (self.config.guidance or self.config.selection == "collision_aware"):
             raise EcahdError("SD guidance and the collision_aware rule need the cost J "
                              "(a CollisionCost)")
@@ -216,7 +229,7 @@ class SparseDiffusion:
         self.placer = placer
         # [m] the median spacing of the expert waypoints the model learnt (None: not recorded,
         # checkpoints before 2026-12-03)
-        spacing = checkpoint.meta.get("expert_spacing")
+        spacing = None if general else checkpoint.meta.get("expert_spacing")
         self.expert_spacing = float(spacing) if spacing else None
 
     def plan(self, start, goal, *, horizon: int | None = None,
@@ -294,19 +307,21 @@ class SparseDiffusion:
                 place_reach: float | None = None, model: str | None = None,
                 device: str = "cpu") -> "SparseDiffusion":
         """SD on ``grid`` for ``footprint`` as the commands and benchmarks build it: the map's
-        model (``model``: a checkpoint path; None: the shipped one or one on $ECAHD_MODELS),
+        model (``model``: a checkpoint path, per-map or generalist; "general": the shipped
+        generalist; None: the map's shipped one or one on $ECAHD_MODELS),
         J's ``cost`` (a CollisionCost; None: built with the map's margin) and the placer of
         ``place_reach`` [m] (None: by the map, ``placement.placer_for``; 0: off)."""
         from ecahd_core.cost import CollisionCost
-        from ecahd_core.model_zoo import load_model
+        from ecahd_core.model_zoo import load_sd
         from ecahd_core.placement import placer_for
 
         config = config or SparseConfig()
         if cost is None:
             cost = CollisionCost.build(grid, footprint)
-        ckpt = load_model("sd", grid, path=model, footprint=footprint, horizon=config.horizon)
+        ckpt = load_sd(grid, path=model, footprint=footprint, horizon=config.horizon,
+                       device=device)
         return cls(ckpt, config, cost=cost, device=device,
-                   placer=placer_for(grid, footprint, place_reach))
+                   placer=placer_for(grid, footprint, place_reach), grid=grid)
 
     def on(self, *, cost=None, placer=None) -> "SparseDiffusion":
         """A view of this SD (the same model, sampler and settings) that weighs candidates by
