@@ -18,6 +18,7 @@ import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -211,9 +212,13 @@ def check_model(kind: str, map_name: str, *, path: str | Path | None = None, foo
     """A node's start-up check of its model, before any map arrives: the checkpoint exists, is
     readable, is of ``kind``, for ``map_name``, fits the robot and the horizon. Returns the
     path. The map's fingerprint is checked later by :func:`load_model`, on the received grid.
-    Raises CheckpointError naming the problem."""
-    from types import SimpleNamespace
-
+    Raises CheckpointError naming the problem. A generalist (``path`` "general" or a file of
+    one, SD or DD) plans on any map: only its file and SD's horizon are checked."""
+    if path is not None and kind in GENERAL_FILES:
+        general = read_general(kind, path)
+        if general is not None:
+            _check_fit(general, general.source, None, horizon if kind == "sd" else None)
+            return Path(general.source)
     grid = SimpleNamespace(name=map_name, fingerprint=None)
     if path is None:
         path = shipped_path(map_name, kind)
@@ -272,27 +277,32 @@ def _general_file(kind: str) -> Path:
     return path
 
 
-def load_dd(grid, *, path: str | Path | None = None, footprint=None, device: str = "cpu"):
-    """DD's checkpoint for ``grid``: the map's own (:func:`load_model`) or the segment-frame
-    generalist (``general.segment_dd``), which refines segments on any map.
-
-    Args:
-        path: None: the map's shipped DD; ``GENERAL``: the shipped generalist
-            (:func:`general_path`); a file: that checkpoint, per-map or segment-frame by its
-            meta.
-    Raises:
-        CheckpointError naming the file and the problem.
-    """
-    from ecahd_core.diffusion.training import load_checkpoint
+def read_general(kind: str, path: str | Path, *, device: str = "cpu"):
+    """The generalist of ``kind`` that ``path`` names ("general": the shipped one, or a file of
+    one), or None when ``path`` is a per-map checkpoint. "sd": the map-conditioned SD
+    (``general.GeneralCheckpoint``); "dd": the segment-frame DD (a DD checkpoint whose meta
+    says so, ``general.segment_dd``). Raises CheckpointError naming the file when it is
+    missing, unreadable or of another kind."""
+    from ecahd_core.diffusion.training import Checkpoint, read_checkpoint_file
+    from ecahd_core.general.checkpoint import GENERAL_CHECKPOINT_FORMAT, GeneralCheckpoint
     from ecahd_core.general.segment_dd import is_segment_frame
 
-    if path is None:
-        return load_model("dd", grid, footprint=footprint, device=device)
-    path = _general_file("dd") if str(path) == GENERAL else Path(path)
-    ckpt = load_checkpoint(path, expect={"kind": "dd"}, map_location=device)
-    if not is_segment_frame(ckpt):
-        return load_model("dd", grid, path=path, footprint=footprint, device=device)
-    return ckpt
+    path = _general_file(kind) if str(path) == GENERAL else Path(path)
+    payload = read_checkpoint_file(path, map_location=device)
+    if kind == "sd":
+        if isinstance(payload, dict) and payload.get("format") == GENERAL_CHECKPOINT_FORMAT:
+            return GeneralCheckpoint.from_dict(payload, source=path)
+        return None
+    if kind == "dd" and isinstance(payload, dict) and payload.get("kind") == "dd" \
+            and is_segment_frame(SimpleNamespace(meta=payload.get("meta") or {})):
+        return Checkpoint.from_dict(payload, source=path)
+    return None
+
+
+def is_general(kind: str, path: str | Path | None) -> bool:
+    """Whether ``path`` (a node's ``sd_model`` / ``dd_model``) names a generalist of ``kind``,
+    which plans on any map (:func:`read_general`)."""
+    return bool(path) and kind in GENERAL_FILES and read_general(kind, path) is not None
 
 
 def load_sd(grid, *, path: str | Path | None = None, footprint=None,
@@ -310,21 +320,29 @@ def load_sd(grid, *, path: str | Path | None = None, footprint=None,
     Raises:
         CheckpointError naming the file and the problem.
     """
-    from ecahd_core.diffusion.training import read_checkpoint_file
-    from ecahd_core.general.checkpoint import GENERAL_CHECKPOINT_FORMAT, GeneralCheckpoint
-
-    if path is None:
-        return load_model("sd", grid, footprint=footprint, horizon=horizon, device=device)
-    path = _general_file("sd") if str(path) == GENERAL else Path(path)
-    payload = read_checkpoint_file(path, map_location=device)
-    if not (isinstance(payload, dict) and payload.get("format") == GENERAL_CHECKPOINT_FORMAT):
+    general = None if path is None else read_general("sd", path, device=device)
+    if general is None:
         return load_model("sd", grid, path=path, footprint=footprint, horizon=horizon,
                           device=device)
-    ckpt = GeneralCheckpoint.from_dict(payload, source=path)
-    if horizon is not None and int(horizon) not in ckpt.horizons:
-        raise CheckpointError(f"checkpoint '{path}' was trained for horizons "
-                              f"{list(ckpt.horizons)}, not {horizon}")
-    return ckpt
+    _check_fit(general, general.source, None, horizon)
+    return general
+
+
+def load_dd(grid, *, path: str | Path | None = None, footprint=None, device: str = "cpu"):
+    """DD's checkpoint for ``grid``: the map's own (:func:`load_model`) or the segment-frame
+    generalist (``general.segment_dd``), which refines segments on any map.
+
+    Args:
+        path: None: the map's shipped DD; ``GENERAL``: the shipped generalist
+            (:func:`general_path`); a file: that checkpoint, per-map or segment-frame by its
+            meta.
+    Raises:
+        CheckpointError naming the file and the problem.
+    """
+    general = None if path is None else read_general("dd", path, device=device)
+    if general is None:
+        return load_model("dd", grid, path=path, footprint=footprint, device=device)
+    return general
 
 
 def learnt_map(site, grid) -> tuple:

@@ -135,6 +135,10 @@ class GlobalPlanner(ManagedNode):
             check_model(p.method, p.map_name,
                         path=(p.sd_model if p.method == "sd" else p.fd_model) or None,
                         footprint=self.footprint, horizon=p.horizon if p.method == "sd" else None)
+        from ecahd_core.model_zoo import is_general
+
+        # the generalist SD plans on any map: a map of another extent is planned on at once
+        self._general = p.method == "sd" and is_general("sd", p.sd_model)
         from ecahd_core.threads import lower_priority, set_torch_threads
 
         import torch
@@ -227,7 +231,8 @@ class GlobalPlanner(ManagedNode):
         t0 = time.perf_counter()
         grid = msg_to_grid(msg, name=p.map_name)
         # with a model, an update of the site's map keeps it (MapError: another extent)
-        learnt, changed = (grid, 0.0) if p.method == "astar" else learnt_map(self._site, grid)
+        learnt, changed = ((grid, 0.0) if p.method == "astar" or self._general
+                           else learnt_map(self._site, grid))
         built = {}
         warm = ""
         if p.method == "sd":
@@ -267,14 +272,14 @@ class GlobalPlanner(ManagedNode):
     def _build_sd(self, grid, learnt) -> SparseDiffusion:
         """SD on ``grid`` with the model of ``learnt`` (the site's map; ``grid`` or an earlier
         version of it)."""
-        from ecahd_core.model_zoo import load_model
+        from ecahd_core.model_zoo import load_sd
 
         p = self.params
-        ckpt = load_model("sd", learnt, path=p.sd_model or None, footprint=self.footprint,
-                          horizon=p.horizon)
+        ckpt = load_sd(learnt, path=p.sd_model or None, footprint=self.footprint,
+                       horizon=p.horizon)
         cost = (collision_cost(p, grid, self.footprint)
                 if p.selection == "collision_aware" else None)
-        return SparseDiffusion(ckpt, p.sparse_config(), cost=cost)
+        return SparseDiffusion(ckpt, p.sparse_config(), cost=cost, grid=grid)
 
     def _build_fd(self, grid, learnt):
         from ecahd_core.model_zoo import load_model

@@ -20,7 +20,9 @@ _MISSION = MissionConfig()
 PARAMETERS = [
     ParamSpec("method", _ONLINE.method, f"global planner: {list(METHODS)} (sd: ECAHD, replanned at each "
                               "waypoint; astar, fd: one whole path per goal)"),
-    ParamSpec("sd_model", "", "SD checkpoint path; '' = the shipped model for map_name"),
+    ParamSpec("sd_model", "", "SD checkpoint path; '' = the shipped model for map_name; "
+                              "'general' = the shipped map-conditioned generalist (any map, "
+                              "and a new map is planned on at once)"),
     ParamSpec("fd_model", "", "FD checkpoint path (method fd); '' = the shipped model"),
     ParamSpec("fd_guidance", False, "method fd: guide the Full Diffusion sample by J"),
     *shared("map_name"),

@@ -137,6 +137,10 @@ class LocalRefiner(ManagedNode):
             from ecahd_core.model_zoo import check_model
 
             check_model("dd", p.map_name, path=p.dd_model or None, footprint=self.footprint)
+        from ecahd_core.model_zoo import is_general
+
+        # the segment-frame DD refines segments on any map: another extent is taken at once
+        self._general = p.dd_enabled and is_general("dd", p.dd_model)
         from ecahd_core.threads import set_torch_threads
 
         import torch
@@ -250,13 +254,14 @@ class LocalRefiner(ManagedNode):
 
     def _build_world(self, grid) -> None:
         """(map worker) Everything the local stage needs on ``grid``, swapped in at once."""
-        from ecahd_core.model_zoo import load_model
+        from ecahd_core.model_zoo import load_dd
         from ecahd_core.planning.local import SegmentRefiner
 
         p = self.params
-        # with a model, an update of the site's map keeps it (MapError: another extent)
-        learnt, changed = learnt_map(self._site, grid) if p.dd_enabled else (grid, 0.0)
-        ckpt = (load_model("dd", learnt, path=p.dd_model or None, footprint=self.footprint)
+        # with a per-map model, an update of the site's map keeps it (MapError: another extent)
+        learnt, changed = (learnt_map(self._site, grid) if p.dd_enabled and not self._general
+                           else (grid, 0.0))
+        ckpt = (load_dd(learnt, path=p.dd_model or None, footprint=self.footprint)
                 if p.dd_enabled else None)
         cost = collision_cost(p, grid, self.footprint)
         # Algorithm 1's local stage, the offline planner's own (DenseStage)

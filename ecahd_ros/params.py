@@ -173,7 +173,8 @@ SHARED = {spec.name: spec for spec in [
                                        "site's models; more than this share of its cells "
                                        "changed is warned about (the models learnt the old "
                                        "map: consider training again)"),
-    ParamSpec("dd_model", "", "DD checkpoint path; '' = the shipped model for map_name "
+    ParamSpec("dd_model", "", "DD checkpoint path; '' = the shipped model for map_name; "
+                              "'general' = the shipped segment-frame DD (any map) "
                               "(global_planner: compute_path_to_pose's dense path)"),
     ParamSpec("seed", 0, "seed of the sampler's torch.Generator (a seed reproduces the plans)"),
     ParamSpec("yaw_goal_tolerance", 0.25, "[rad] a goal with a heading (navigate_to_pose, or "

@@ -108,6 +108,7 @@ class PlanningBenchSettings:
     net_retries: int = 2  # SafetyNetConfig's default
     net_resamples: int = 2  # SafetyNetConfig's default (0: the net skips its resample rule)
     sd_model: str | None = None  # SD's checkpoint (None: the map's; "general": the generalist)
+    dd_model: str | None = None  # DD's checkpoint (None: the map's; "general": segment-frame)
 
 
 GUIDANCE_RUNS = {"both": (False, True), "on": (True,), "off": (False,)}
@@ -266,7 +267,8 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                         polish_steps=settings.polish_steps, keep_better=settings.keep_better),
                     replan=settings.replan, replan_spacing=settings.replan_spacing,
                     backtracks=settings.backtracks, subgoals=settings.subgoals,
-                    settle=settings.settle, exact=settings.exact_rule and not variant)
+                    settle=settings.settle, exact=settings.exact_rule and not variant,
+                    model=settings.dd_model)
                 spacings[robot] = hd.replan_spacing
 
                 last = []  # the last HierarchicalPlan, for the net's retries
@@ -366,6 +368,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                "safety_net": settings.safety_net, "net_retries": settings.net_retries,
                "net_resamples": settings.net_resamples,
                "sd_model": settings.sd_model or "the map's",
+               "dd_model": settings.dd_model or "the map's",
                "torch": torch.__version__,
                "threads": torch.get_num_threads()}
     return PlanningBenchResult(cells=cells, ablation=ablation, examples=examples,

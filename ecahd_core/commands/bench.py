@@ -245,6 +245,9 @@ def _add_planning_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sd-model", metavar="CKPT", default=None,
                         help="SD's checkpoint: a file (per-map or generalist) or 'general' (the "
                              "shipped generalist, zero-shot on any map); default: the map's own")
+    parser.add_argument("--dd-model", metavar="CKPT", default=None,
+                        help="DD's checkpoint: a file (per-map or segment-frame) or 'general' "
+                             "(the shipped segment-frame DD, any map); default: the map's own")
     parser.add_argument("--json", metavar="FILE", help="one record per cell")
     parser.add_argument("--md", metavar="FILE", help="Table I / Table II as markdown")
     parser.add_argument("--png", metavar="FILE", help="one problem planned by every method")
@@ -267,7 +270,8 @@ def _run_planning(args: argparse.Namespace) -> int:
         place_reach=args.place_reach, ablation=not args.no_ablation, precision=args.precision,
         net_resamples=args.net_resamples, replan_spacing=args.replan_spacing,
         guidance=args.guidance, leg_batches=args.leg_batches, backtracks=args.backtracks,
-        subgoals=not args.no_subgoals, settle=not args.no_settle, sd_model=args.sd_model)
+        subgoals=not args.no_subgoals, settle=not args.no_settle, sd_model=args.sd_model,
+        dd_model=args.dd_model)
     result = run_planning_benchmark(settings, progress=not args.no_progress)
     md = format_markdown(result)
     print(md)
