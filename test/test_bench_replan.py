@@ -56,3 +56,20 @@ def test_bench_replan_accepts_good_settings_and_rejects_a_bad_map():
         load_bench_map("office:axb:0.05:1")
     with pytest.raises(EcahdError, match="KIND:WxH:RES:SEED"):
         run_replan_benchmark(ReplanBenchSettings(map="office:axb:0.05:1"), progress=False)
+
+
+def test_map_update_bench_times_an_update_against_the_first_map(capsys):
+    """``ecahd bench map-update`` on maze2d-large with its own SD: a block on the route of each
+    problem, the update planned round it (SD crosses a wall it never learnt: the A* detour),
+    the table with the ratio to the first map."""
+    from ecahd_core.bench.map_update import (MapUpdateBenchSettings, format_table,
+                                             run_map_update_benchmark)
+
+    result = run_map_update_benchmark(MapUpdateBenchSettings(problems=2), progress=False)
+    assert len(result.records) == 2
+    for r in result.records:
+        assert r.round and r.method in ("sd", "fallback_astar")
+        assert 0 < r.plan_ms <= r.update_ms and r.first_ms > 0
+        assert 0 < r.changed_share < 0.05  # at most 400 cells of a 120 x 90 cell maze
+    table = format_table(result)
+    assert "ratio to first map" in table and "planned round the block: 2/2" in table

@@ -23,6 +23,7 @@ from ecahd_core.maps import DEFAULT_MAP
 from ecahd_core.bench import contention as bench_contention
 from ecahd_core.bench import monitor as bench_monitor
 from ecahd_core.bench import replan as bench_replan
+from ecahd_core.bench import map_update as bench_map_update
 from ecahd_core.bench.cost import CostBenchSettings
 from ecahd_core.bench.output import write_json
 from ecahd_core.commands.plan import add_replan_argument
@@ -315,6 +316,10 @@ BENCHMARKS: dict[str, Benchmark] = {
                              "obstacles (fused cost, crossing check, detour) against the "
                              "previous way, in one run",
                         add_arguments=bench_replan.add_arguments, run=bench_replan.run),
+    "map-update": Benchmark(help="global_planner's work when a changed map arrives (a block on "
+                                 "the route) against the first map's, in one run",
+                            add_arguments=bench_map_update.add_arguments,
+                            run=bench_map_update.run),
 }
 
 
