@@ -214,6 +214,7 @@ def check_model(kind: str, map_name: str, *, path: str | Path | None = None, foo
     path. The map's fingerprint is checked later by :func:`load_model`, on the received grid.
     Raises CheckpointError naming the problem. A generalist (``path`` "general" or a file of
     one, SD or DD) plans on any map: only its file and SD's horizon are checked."""
+    path = _own_general(kind, map_name) if path is None else path
     if path is not None and kind in GENERAL_FILES:
         general = read_general(kind, path)
         if general is not None:
@@ -277,6 +278,14 @@ def _general_file(kind: str) -> Path:
     return path
 
 
+def _own_general(kind: str, map_name: str) -> Path | None:
+    """The map's shipped model of ``kind`` when it is a generalist fine-tuned on the map
+    (``ecahd train-general --map ... --from general --ship <map>_sd.pt``), else None."""
+    path = shipped_path(map_name, kind)
+    return path if kind in GENERAL_FILES and path.is_file() and \
+        read_general(kind, path) is not None else None
+
+
 def read_general(kind: str, path: str | Path, *, device: str = "cpu"):
     """The generalist of ``kind`` that ``path`` names ("general": the shipped one, or a file of
     one), or None when ``path`` is a per-map checkpoint. "sd": the map-conditioned SD
@@ -299,10 +308,13 @@ def read_general(kind: str, path: str | Path, *, device: str = "cpu"):
     return None
 
 
-def is_general(kind: str, path: str | Path | None) -> bool:
-    """Whether ``path`` (a node's ``sd_model`` / ``dd_model``) names a generalist of ``kind``,
-    which plans on any map (:func:`read_general`)."""
-    return bool(path) and kind in GENERAL_FILES and read_general(kind, path) is not None
+def is_general(kind: str, path: str | Path | None, map_name: str | None = None) -> bool:
+    """Whether ``path`` (a node's ``sd_model`` / ``dd_model``; empty: the shipped model of
+    ``map_name``) names a generalist of ``kind``, which plans on any map
+    (:func:`read_general`)."""
+    if not path:
+        return map_name is not None and _own_general(kind, map_name) is not None
+    return kind in GENERAL_FILES and read_general(kind, path) is not None
 
 
 def load_sd(grid, *, path: str | Path | None = None, footprint=None,
@@ -320,6 +332,7 @@ def load_sd(grid, *, path: str | Path | None = None, footprint=None,
     Raises:
         CheckpointError naming the file and the problem.
     """
+    path = _own_general("sd", grid.name) if path is None else path
     general = None if path is None else read_general("sd", path, device=device)
     if general is None:
         return load_model("sd", grid, path=path, footprint=footprint, horizon=horizon,

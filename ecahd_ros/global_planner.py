@@ -138,7 +138,7 @@ class GlobalPlanner(ManagedNode):
         from ecahd_core.model_zoo import is_general
 
         # the generalist SD plans on any map: a map of another extent is planned on at once
-        self._general = p.method == "sd" and is_general("sd", p.sd_model)
+        self._general = p.method == "sd" and is_general("sd", p.sd_model, p.map_name)
         from ecahd_core.threads import lower_priority, set_torch_threads
 
         import torch

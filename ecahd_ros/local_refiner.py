@@ -140,7 +140,7 @@ class LocalRefiner(ManagedNode):
         from ecahd_core.model_zoo import is_general
 
         # the segment-frame DD refines segments on any map: another extent is taken at once
-        self._general = p.dd_enabled and is_general("dd", p.dd_model)
+        self._general = p.dd_enabled and is_general("dd", p.dd_model, p.map_name)
         from ecahd_core.threads import set_torch_threads
 
         import torch

@@ -151,3 +151,38 @@ def test_a_truncated_checkpoint_is_one_line_naming_it(tiny_data, tmp_path, capsy
                  "--no-progress"])
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and str(tmp_path / "none") in err
+
+
+def test_fine_tuning_on_one_map_starts_from_a_generalist(tiny_data, tmp_path, capsys,
+                                                          monkeypatch):
+    """``ecahd train-general --map M --from CKPT``: the map's own expert data, training from the
+    generalist's weights (recorded), resumable; the shipped file is a generalist that load_sd
+    reads as the map's own model."""
+    from ecahd_core.maps import builtin_map
+    from ecahd_core.model_zoo import load_sd
+
+    base = train_general(GroupedData(tiny_data), TINY_RECIPE, out_path=tmp_path / "base.pt",
+                         steps=2, model_config=tiny_config(), checkpoint_minutes=None,
+                         progress=False).checkpoint
+    base.save(tmp_path / "base_ship.pt", include_training_state=False)
+    data = tmp_path / "ft-data"
+    args = ["train-general", "--map", "maze2d-umaze", "--pairs", "6", "--data", str(data),
+            "--from", str(tmp_path / "base_ship.pt"), "--out", str(tmp_path / "ft.pt"),
+            "--maps-per-batch", "1", "--problems-per-map", "4", "--lr", "1e-3", "--warmup", "0",
+            "--no-progress"]
+    assert main(args + ["--steps", "3", "--ship", str(tmp_path / "maze2d-umaze_sd.pt")]) == 0
+    ft = load_general_checkpoint(tmp_path / "ft.pt")
+    assert ft.step == 3 and ft.model_config == base.model_config
+    assert ft.data["init_from"].endswith("base_ship.pt") and ft.data["init_step"] == 2
+    assert ft.data["maps"] == 1
+    moved = [not torch.equal(ft.ema_state_dict[k], v) for k, v in base.ema_state_dict.items()
+             if v.is_floating_point()]
+    assert any(moved)
+    # the data stays and a resume goes on from the fine-tuned weights
+    assert main(args + ["--steps", "4", "--resume"]) == 0
+    assert load_general_checkpoint(tmp_path / "ft.pt").step == 4
+    out = capsys.readouterr().out
+    assert "already there" in out and "from " in out
+    # shipped as the map's own SD: load_sd finds the generalist
+    monkeypatch.setenv("ECAHD_MODELS", str(tmp_path))
+    assert load_sd(builtin_map("maze2d-umaze")).step == 3

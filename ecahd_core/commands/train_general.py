@@ -4,6 +4,8 @@ buildings (``ecahd_core.general``).
     ecahd train-general --maps 1000 --minutes 600          # build the data, then train 10 h
     ecahd train-general --resume --minutes 600             # go on from the last checkpoint
     ecahd train-general --data runs/general/data --steps 200 --out /tmp/g.pt
+    ecahd train-general --map my.yaml --from general --minutes 3 --out my.pt --ship my_sd.pt
+                                                           # fine-tune on one map
     ecahd train-general-dd --maps 60 --out general_dd.pt     # the segment-frame DD
 
 ``--maps N`` builds (or finishes building: resumable) the dataset of N maps in ``--data`` first;
@@ -29,13 +31,22 @@ DEFAULT_STEPS = 60_000  # ~7.5 h at 0.45 s a step on one core; --minutes stops i
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--data", default=str(DEFAULT_DIR / "data"),
-                   help="generalist dataset directory (`general.data`'s shards)")
+    p.add_argument("--data", default=None,
+                   help="generalist dataset directory (`general.data`'s shards; default "
+                        "runs/general/data)")
     p.add_argument("--maps", type=int, default=None, metavar="N",
                    help="build (or finish building) a dataset of N generated maps in --data "
                         "first (1.4 s a map on one core; resumable)")
     p.add_argument("--data-seed", type=int, default=0,
                    help="the dataset's seed (map seeds 10^6 x seed + j); with --maps")
+    p.add_argument("--map", default=None, metavar="YAML",
+                   help="fine-tune on this one map (a Nav2 YAML or a built-in maze): its own "
+                        "expert data is built in --data (default runs/general/finetune-NAME); "
+                        "with --from")
+    p.add_argument("--pairs", type=int, default=400,
+                   help="with --map: expert paths on the map (two samples each)")
+    p.add_argument("--from", dest="init_from", default=None, metavar="CKPT",
+                   help="start from this generalist's weights ('general': the shipped one)")
     p.add_argument("--out", default=str(DEFAULT_DIR / "general.pt"),
                    help="checkpoint with training state (written every --checkpoint-minutes)")
     p.add_argument("--resume", action="store_true", help="continue from --out")
@@ -85,7 +96,27 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if args.resume:  # a missing or broken checkpoint fails before the data is touched
         load_general_checkpoint(out)
-    data_dir = Path(args.data)
+    init = None
+    if args.init_from is not None:
+        from ecahd_core.model_zoo import read_general
+
+        init = read_general("sd", args.init_from)
+        if init is None:
+            raise DatasetError(f"--from {args.init_from!r} is not a generalist SD checkpoint")
+    if args.map is not None and args.maps is not None:
+        raise DatasetError("--map (one given map) and --maps (generated maps) exclude each "
+                           "other")
+    data_dir = Path(args.data) if args.data else DEFAULT_DIR / "data"
+    if args.map is not None:
+        from ecahd_core.general.data import build_for_map
+        from ecahd_core.maps import load_map
+
+        grid = load_map(args.map)
+        data_dir = Path(args.data) if args.data else DEFAULT_DIR / f"finetune-{grid.name}"
+        report = build_for_map(data_dir, grid, pairs=args.pairs, seed=args.data_seed)
+        print(f"dataset {data_dir} of map {grid.name!r}: {report.samples} samples in "
+              f"{report.seconds:.0f} s" if report.shards_written else
+              f"dataset {data_dir} of map {grid.name!r}: already there", flush=True)
     if args.maps is not None:
         t0 = time.perf_counter()
         report = build(data_dir, GeneralDataConfig(maps=args.maps, seed=args.data_seed),
@@ -96,6 +127,8 @@ def run(args: argparse.Namespace) -> int:
     if not data_dir.is_dir():
         raise DatasetError(f"dataset directory {str(data_dir)!r} does not exist: build it "
                            f"with --maps N")
+    start = ("on from " + str(out) if args.resume
+             else f"from {init.source}" if init is not None else "from scratch")
     t0 = time.perf_counter()
     data = GroupedData(data_dir, progress=not args.no_progress)
     if len(list(data_dir.glob("shard-*.npz"))) < data.config.shards:
@@ -105,14 +138,14 @@ def run(args: argparse.Namespace) -> int:
                            f"{data.config.maps} --data-seed {data.config.seed}")
     print(f"data: {len(data)} samples of {data.maps} maps, {data.distinct_global_views} "
           f"distinct global views, loaded in {time.perf_counter() - t0:.0f} s; training "
-          f"{'on from ' + str(out) if args.resume else 'from scratch'} up to "
+          f"{start} up to "
           f"{args.steps} steps x batch {cfg.batch_size}"
           + (f", at most {args.minutes:g} min (until ~"
              f"{time.strftime('%H:%M', time.localtime(time.time() + 60 * args.minutes))})"
              if args.minutes is not None else ""), flush=True)
     result = train_general(data, cfg, out_path=out, steps=args.steps, resume=args.resume,
                            minutes=args.minutes, checkpoint_minutes=args.checkpoint_minutes,
-                           device=args.device, progress=not args.no_progress)
+                           device=args.device, progress=not args.no_progress, init_from=init)
     if args.ship:
         result.checkpoint.save(args.ship, include_training_state=False)
         print(f"inference-only model: {args.ship}")

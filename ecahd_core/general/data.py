@@ -212,22 +212,60 @@ def build(directory: str | os.PathLike, config: GeneralDataConfig | None = None,
                        samples=samples, seconds=time.perf_counter() - t0)
 
 
+def build_for_map(directory: str | os.PathLike, grid, *, pairs: int = 400, seed: int = 0
+                  ) -> BuildReport:
+    """The generalist data of one given map (``grid``, e.g. a user's building: fine-tuning,
+    ``ecahd train-general --map``): ``pairs`` expert paths, one shard, written atomically;
+    an existing shard of the same map and settings is kept."""
+    config = GeneralDataConfig(maps=1, maps_per_shard=1, pairs_per_map=pairs, seed=seed)
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    path = shard_path(directory, 0)
+    t0 = time.perf_counter()
+    if path.exists():
+        shard = next(iter_shards(directory))
+        if shard.config.to_json() == config.to_json() and \
+                shard.maps[0].get("fingerprint") == grid.fingerprint():
+            return BuildReport(directory=directory, shards_written=0, shards_skipped=1,
+                               samples=0, seconds=time.perf_counter() - t0)
+        raise DatasetError(f"{str(directory)!r} holds generalist data of another map or "
+                           f"settings; build in another directory")
+    arrays, record = map_samples(config, 0, grid=grid)
+    if not len(arrays["horizon"]):
+        raise DatasetError(f"map {grid.name!r}: no expert problem could be made "
+                           f"({record.get('error', 'every view too wide')})")
+    _write_shard(path, arrays, [record], config)
+    return BuildReport(directory=directory, shards_written=1, shards_skipped=0,
+                       samples=len(arrays["horizon"]), seconds=time.perf_counter() - t0)
+
+
 def _shard_maps(config: GeneralDataConfig, k: int) -> range:
     return range(k * config.maps_per_shard, min((k + 1) * config.maps_per_shard, config.maps))
 
 
-def map_samples(config: GeneralDataConfig, j: int) -> tuple[dict[str, np.ndarray], dict]:
-    """Map j's samples (the shard arrays of the module docstring, N rows) and its record."""
+def map_samples(config: GeneralDataConfig, j: int, grid=None
+                ) -> tuple[dict[str, np.ndarray], dict]:
+    """Map j's samples (the shard arrays of the module docstring, N rows) and its record;
+    ``grid``: a given map (a user's, for fine-tuning) instead of generated map j, its expert
+    seeded with ``config.seed``."""
     t0 = time.perf_counter()
-    map_config = config.map_config(j)
-    grid = generate_map(map_config)
-    record = {"index": j, "name": map_config.name, "kind": map_config.kind.value,
-              "width": map_config.width, "height": map_config.height,
-              "resolution": map_config.resolution, "seed": map_config.seed,
-              "fingerprint": grid.fingerprint()}
+    if grid is None:
+        map_config = config.map_config(j)
+        grid = generate_map(map_config)
+        seed = map_config.seed
+        record = {"index": j, "name": map_config.name, "kind": map_config.kind.value,
+                  "width": map_config.width, "height": map_config.height,
+                  "resolution": map_config.resolution, "seed": seed,
+                  "fingerprint": grid.fingerprint()}
+    else:
+        x0, y0, x1, y1 = grid.bounds
+        seed = config.seed
+        record = {"index": j, "name": grid.name, "kind": "given", "width": x1 - x0,
+                  "height": y1 - y0, "resolution": grid.resolution, "seed": seed,
+                  "fingerprint": grid.fingerprint()}
     P = config.sparse_horizon
     try:
-        expert = generate_dataset(grid, pairs=config.pairs_per_map, seed=map_config.seed,
+        expert = generate_dataset(grid, pairs=config.pairs_per_map, seed=seed,
                                   footprint_spec=config.robot, min_distance=config.min_distance,
                                   sparse_horizon=P, waypoints=config.waypoints, progress=False,
                                   workers=1)

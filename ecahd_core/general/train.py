@@ -317,7 +317,8 @@ def train_general(data: GroupedData, cfg: GeneralTrainConfig, *, out_path: str |
                   steps: int, model_config: GeneralDenoiserConfig | None = None,
                   resume: bool = False, minutes: float | None = None,
                   checkpoint_minutes: float | None = 10.0, device: str = "cpu",
-                  progress: bool = True) -> GeneralTrainResult:
+                  progress: bool = True, init_from: GeneralCheckpoint | None = None
+                  ) -> GeneralTrainResult:
     """Train the map-conditioned denoiser and write its resumable checkpoint.
 
     Args:
@@ -332,8 +333,12 @@ def train_general(data: GroupedData, cfg: GeneralTrainConfig, *, out_path: str |
         checkpoint_minutes: [min] between checkpoints (None: at the end only).
         device: "cpu", "cuda", ...
         progress: a tqdm bar with the loss and the ETA.
+        init_from: start from this generalist's EMA weights (fine-tuning on one map,
+            ``ecahd train-general --map ... --from general``; a fresh optimiser, its warm-up
+            included), recorded in the checkpoint's ``data`` (``init_from``, ``init_step``).
     Raises:
-        CheckpointError: ``resume`` from a missing, unreadable or foreign checkpoint.
+        CheckpointError: ``resume`` from a missing, unreadable or foreign checkpoint, or an
+            ``init_from`` of another model config.
         DatasetError: data that cannot train this model.
     """
     out_path = Path(out_path)
@@ -360,6 +365,13 @@ def train_general(data: GroupedData, cfg: GeneralTrainConfig, *, out_path: str |
                                f"dataset ({ckpt.data.get('directory')}, "
                                f"{ckpt.data.get('samples')} samples) than "
                                f"{str(data.directory)!r} ({len(data)} samples)")
+    init = {}
+    if init_from is not None and not resume:
+        if model_config is not None and model_config != init_from.model_config:
+            raise CheckpointError(f"cannot start from '{init_from.source}': its model config "
+                                  f"differs from this run's")
+        model_config = init_from.model_config
+        init = {"init_from": str(init_from.source), "init_step": int(init_from.step)}
     model_config = model_config or GeneralDenoiserConfig(max_horizon=P, view=data.config.view)
     if model_config.view != data.config.view:
         raise DatasetError(f"{str(data.directory)!r} holds views of {data.config.view}; the "
@@ -376,6 +388,8 @@ def train_general(data: GroupedData, cfg: GeneralTrainConfig, *, out_path: str |
     with torch.random.fork_rng(devices=[]):  # seeded initial weights; caller's RNG untouched
         torch.manual_seed(cfg.seed)
         model = MapConditionedDenoiser(model_config).to(device_t)
+        if init:
+            model.load_state_dict(init_from.ema_state_dict)
     ema = copy.deepcopy(model).eval().requires_grad_(False)
     schedule = NoiseSchedule(cfg.schedule).to(device_t)
     optimizer = torch.optim.AdamW(model.parameters(), lr=cfg.lr, betas=cfg.betas,
@@ -392,6 +406,7 @@ def train_general(data: GroupedData, cfg: GeneralTrainConfig, *, out_path: str |
                                   f"not fit: {type(exc).__name__}: "
                                   f"{(str(exc).splitlines() or [''])[0]}") from exc
         start_step, history = ckpt.step, list(ckpt.loss_history)
+        init = {k: ckpt.data[k] for k in ("init_from", "init_step") if k in ckpt.data}
         elapsed_before = float(state.get("elapsed_s", 0.0))
         log.info("resuming the generalist from %s at step %d", out_path, start_step)
     else:  # torch's global RNG (dropout, if any) from the seed too; a resumed run restores it
@@ -401,7 +416,8 @@ def train_general(data: GroupedData, cfg: GeneralTrainConfig, *, out_path: str |
         return GeneralCheckpoint(
             model_config=model_config, schedule_config=cfg.schedule, conditioned_indices=cond,
             horizons=horizons, ema_state_dict=cpu_state(ema.state_dict()), step=step,
-            train_config=cfg.to_dict(), data=data.identity(), loss_history=tuple(history),
+            train_config=cfg.to_dict(), data={**data.identity(), **init},
+            loss_history=tuple(history),
             training_state={"model_state_dict": cpu_state(model.state_dict()),
                             "optimizer_state_dict": optimizer.state_dict(),
                             "torch_rng_state": torch.get_rng_state(),
@@ -506,7 +522,7 @@ def evaluate_loss(model: MapConditionedDenoiser, data: GroupedData, cfg: General
 
 def _without_directory(identity: dict[str, Any]) -> dict[str, Any]:
     """A dataset's identity but where it lies (a moved dataset is the same data)."""
-    return {k: v for k, v in identity.items() if k != "directory"}
+    return {k: v for k, v in identity.items() if k not in ("directory", "init_from", "init_step")}
 
 
 # ------------------------------------------------------------------------------ step time
