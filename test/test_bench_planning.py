@@ -140,3 +140,21 @@ def test_per_problem_seeds_reseed_each_problem_and_report_each_problem():
     assert 100 * np.mean(cell.free_by_problem) == cell.collision_free
     assert "each problem its own" in format_markdown(seeded)
     assert "each problem its own" not in format_markdown(stream)
+
+
+def test_bench_general_rows_per_family_and_robot():
+    """``ecahd bench general`` with each map's own models on maze2d-large: one row per family and
+    robot with the per-problem verdicts aggregated; the JSON keeps every cell."""
+    from ecahd_core.bench.general import (GeneralBenchSettings, format_table, rows,
+                                          run_general_benchmark)
+
+    result = run_general_benchmark(GeneralBenchSettings(
+        maps=("maze2d-large",), problems=2, robots=("circle",), sd_model=None, dd_model=None),
+        progress=False)
+    (row,) = rows(result)
+    assert row["family"] == "maze2d-large" and row["problems"] == 2
+    cell = result.cells[0]
+    assert row["alone"] == 100 * np.mean(cell["free_by_problem"])
+    assert row["net"] == 100 * np.mean(cell["net_free_by_problem"])
+    assert len(cell["length_ratio_by_problem"]) == 2 and row["length_median"] > 0.9
+    assert "| maze2d-large | circle | 1 | 2 |" in format_table(result)

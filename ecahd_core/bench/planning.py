@@ -150,6 +150,11 @@ class CellResult:
     # plan's time [ms], for paired comparisons of two runs on the same problems
     free_by_problem: list = field(default_factory=list)
     time_ms_by_problem: list = field(default_factory=list)
+    length_ratio_by_problem: list = field(default_factory=list)  # path length / A*'s
+    # with the net: collision-free and the rule that acted last, per problem (None: no net)
+    net_free_by_problem: list | None = None
+    net_rule_by_problem: list | None = None
+    net_time_ms_by_problem: list | None = None
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -189,7 +194,8 @@ def _judge(paths, times, dd, problems, footprint, grid, *, method, guidance, rob
                       time_ms_p95=float(np.percentile(times, 95)),
                       dd_ratio=float(np.mean(dd)) if dd else 0.0, problems=len(problems),
                       free_by_problem=[bool(f) for f in free],
-                      time_ms_by_problem=[round(float(t), 2) for t in times])
+                      time_ms_by_problem=[round(float(t), 2) for t in times],
+                      length_ratio_by_problem=[round(float(r), 4) for r in ratio])
 
 
 def problem_seed(seed: int, index: int) -> int:
@@ -210,7 +216,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
     from ecahd_core.astar import clearance_for_footprint, planner_for
     from ecahd_core.cost import CollisionCost, CostConfig
     from ecahd_core.footprint import make_footprint
-    from ecahd_core.maps import load_map
+    from ecahd_core.bench.replan import load_bench_map
     from ecahd_core.model_zoo import load_model
     from ecahd_core.placement import auto_reach
     from ecahd_core.planning.full import FullDiffusion
@@ -220,7 +226,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
     from ecahd_core.problems import make_problems
     from ecahd_core.safety import SafetyNet, SafetyNetConfig
 
-    grid = load_map(settings.map)
+    grid = load_bench_map(settings.map)
     place_reach = (auto_reach(grid) if settings.place_reach is None  # what "auto" chose
                    else settings.place_reach)
     margin = CostConfig.for_map(grid, margin=settings.margin).margin
@@ -325,6 +331,8 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
             cell.net_unsafe_rate = rate("unsafe")
             cell.net_time_ms_mean, cell.net_time_ms_p95 = after.time_ms_mean, after.time_ms_p95
             cell.net_time_ms_median = after.time_ms_median
+            cell.net_free_by_problem, cell.net_rule_by_problem = after.free_by_problem, net_rules
+            cell.net_time_ms_by_problem = after.time_ms_by_problem
             log.info("%s with the safety net: collision-free %.1f%%, retry %.1f%%, resample "
                      "%.1f%%, fallback %.1f%%, unsafe %.1f%%, %.0f ms", label,
                      cell.net_collision_free, cell.net_retry_rate, cell.net_resample_rate,

@@ -23,6 +23,7 @@ from ecahd_core.maps import DEFAULT_MAP
 from ecahd_core.bench import contention as bench_contention
 from ecahd_core.bench import monitor as bench_monitor
 from ecahd_core.bench import replan as bench_replan
+from ecahd_core.bench import general as bench_general
 from ecahd_core.bench import map_update as bench_map_update
 from ecahd_core.bench.cost import CostBenchSettings
 from ecahd_core.bench.output import write_json
@@ -320,6 +321,10 @@ BENCHMARKS: dict[str, Benchmark] = {
                                  "the route) against the first map's, in one run",
                             add_arguments=bench_map_update.add_arguments,
                             run=bench_map_update.run),
+    "general": Benchmark(help="ECAHD with one model (the generalists by default) on held-out "
+                              "maps of every family: alone, with the net, A* fallback, time, "
+                              "length over A*'s",
+                         add_arguments=bench_general.add_arguments, run=bench_general.run),
 }
 
 
