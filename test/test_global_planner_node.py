@@ -670,3 +670,33 @@ def test_an_updated_map_of_the_site_keeps_the_model_and_is_planned_round(rig):
     r.spin_for(1.0)
     assert r.planner.grid.fingerprint() == updated.fingerprint()
     assert len(r.plans) == n
+
+
+def test_with_the_generalist_a_map_of_another_extent_is_planned_on_at_once(rig, tmp_path):
+    """sd_model: a generalist checkpoint (here a tiny untrained one: the plumbing, not the
+    plans' quality): the node plans on maze2d-large, then takes maze2d-medium (another extent,
+    which a per-map model refuses) and plans the active goal on it at once."""
+    import torch
+
+    from ecahd_core.diffusion.scheduler import ScheduleConfig
+    from ecahd_core.general.checkpoint import GeneralCheckpoint
+    from ecahd_core.general.model import GeneralDenoiserConfig, MapConditionedDenoiser
+
+    torch.manual_seed(0)
+    config = GeneralDenoiserConfig(max_horizon=10, d_model=32, n_layers=2, n_heads=2, ff_mult=2,
+                                   global_channels=(8, 8, 16), local_channels=(8, 8, 8))
+    path = GeneralCheckpoint(
+        model_config=config, schedule_config=ScheduleConfig(), conditioned_indices=(0, -1),
+        horizons=tuple(range(2, 11)), ema_state_dict=MapConditionedDenoiser(config).state_dict(),
+        step=0, train_config={}, data={}).save(tmp_path / "g.pt", include_training_state=False)
+    r = rig(sd_model=str(path))
+    ready(r)
+    r.send_goal((2.5, 3.5))  # free on both mazes
+    r.spin_until(lambda: r.plans)
+    n = len(r.plans)
+    medium = builtin_map("maze2d-medium")
+    r._matched(r.map_pub, grid_to_msg(medium))
+    r.spin_until(lambda: len(r.plans) > n)
+    assert r.planner.grid.fingerprint() == medium.fingerprint()
+    path_xy = path_to_xy(r.plans[-1])
+    assert np.allclose(path_xy[0], ROBOT) and np.allclose(path_xy[-1], (2.5, 3.5))
