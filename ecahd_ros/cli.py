@@ -2,7 +2,7 @@
 
     ecahd plan      plan one path on a map and draw it
     ecahd map       describe a map, export it as Nav2 YAML + PGM, draw it
-    ecahd dataset   generate A* expert data for training
+    ecahd dataset   generate A* expert data for training (--from-bags: the robot's own driving)
     ecahd train     train one diffusion model;  ecahd train-all: a map's dataset and all models
     ecahd train-general   the generalist SD that reads the map, on many generated buildings
     ecahd train-general-dd   the generalist DD, in each segment's own frame
@@ -26,7 +26,8 @@ from ecahd_core.errors import EcahdError
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "plan": ("ecahd_core.commands.plan", "plan one path on a map and write a PNG / JSON"),
     "map": ("ecahd_core.commands.map", "describe / export a map (Nav2 YAML + PGM, PNG)"),
-    "dataset": ("ecahd_core.commands.dataset", "generate A* expert data (.npz) for training"),
+    "dataset": ("ecahd_ros.dataset_bags",
+                "generate A* expert data (.npz) for training, or demonstrations from bags"),
     "train": ("ecahd_core.commands.train", "train one diffusion model (sd, dd, fd) on a dataset"),
     "train-all": ("ecahd_core.commands.train:all",
                   "dataset + all models of a map, seeded (reproduces the shipped models)"),

@@ -176,11 +176,12 @@ def _namespaces(counts: dict) -> list[str]:
     return sorted(found)
 
 
-def resolve_topics(counts: dict, namespace: str | None, path) -> tuple[str, dict]:
+def resolve_topics(counts: dict, namespace: str | None, path, *,
+                   require_map: bool = True) -> tuple[str, dict]:
     """Which of the bag's topics to read: ``counts`` {topic: messages} (``bag_topics``),
     ``namespace`` "/robot1" (a missing leading '/' is added; "" or "/": the root) or None:
     auto, the root when it has /map and a pose source (/odom, /tf, /tf_static), else the one
-    namespace that has them. -> (namespace, {name in TOPICS: the bag's topic}); tf's are the
+    namespace that has them (``require_map`` False: a pose source alone). -> (namespace, {name in TOPICS: the bag's topic}); tf's are the
     namespace's own when it recorded messages on them, else the global ones. Raises BagError
     for several candidate namespaces or a namespace with no topic in the bag."""
     from ecahd_core.errors import BagError
@@ -192,7 +193,7 @@ def resolve_topics(counts: dict, namespace: str | None, path) -> tuple[str, dict
         return {t: ns + t if has(ns + t) else t for t in TF_TOPICS}
 
     def usable(ns: str) -> bool:
-        return has(ns + "/map") and (has(ns + "/odom") or any(map(has, tf_of(ns).values())))
+        return (has(ns + "/map") or not require_map) and (has(ns + "/odom") or any(map(has, tf_of(ns).values())))
 
     spaces = _namespaces(counts)
     if namespace is None:
@@ -307,6 +308,30 @@ def _poses_from_tf(data: dict, base_frame: str, topics: dict, path) -> list:
     return out
 
 
+def odometry_record(t_ns: int, msg) -> tuple[tuple, str]:
+    """One nav_msgs/Odometry received at ``t_ns`` [ns] -> ((receive time [s], stamp [s], x,
+    y, yaw), its frame without a leading '/')."""
+    from ecahd_core.bag_io import quaternion_yaw, stamp_seconds
+
+    p = msg.pose.pose
+    return ((t_ns * 1e-9, stamp_seconds(msg.header.stamp), p.position.x, p.position.y,
+             quaternion_yaw(p.orientation)), msg.header.frame_id.lstrip("/"))
+
+
+def robot_poses(odom: list, frames: list, data: dict, topics: dict, path,
+                base_frame: str = BASE_FRAME) -> tuple[list, str]:
+    """The robot's poses in GLOBAL_FRAME as records (receive time [s], stamp [s], x, y, yaw)
+    and where they came from ("odom" | "tf"): ``odom`` records (:func:`odometry_record`) in
+    ``frames`` placed in map through the recorded tf where they are in another frame
+    (REP-105); without odometry, ``base_frame``'s pose from ``data``'s /tf and /tf_static
+    (:func:`_poses_from_tf`). Raises BagError as those do."""
+    if odom:
+        if set(frames) - {"", GLOBAL_FRAME}:  # a robot's odometry: placed in map through tf
+            odom = _in_global_frame(odom, frames, data, path)
+        return odom, "odom"
+    return _poses_from_tf(data, base_frame, topics, path), "tf"  # its base frame from tf
+
+
 def _goals(data: dict, topics: dict, path) -> tuple[list, str]:
     """The goals (receive time [s], x, y) and their source: goal_pose, else the plans' ends
     (``evaluation.goals_from_plans``); BagError when there are neither."""
@@ -332,7 +357,7 @@ def evaluate_bag(path, *, robot: str = "circle", map_name: str = "recorded",
     """Read a bag and compute the metrics of each episode; raises BagError when the map, goals
     or poses are missing. ``namespace``: the robot's topics' namespace (None: auto);
     ``base_frame``: the frame whose pose tf gives when there is no odometry."""
-    from ecahd_core.bag_io import bag_topics, quaternion_yaw, read_bag, stamp_seconds
+    from ecahd_core.bag_io import bag_topics, read_bag
     from ecahd_core.errors import BagError
     from ecahd_core.evaluation import (cmd_intervals, control_times, evaluate_episode,
                                        exact_contacts, split_episodes, summarize)
@@ -353,17 +378,9 @@ def evaluate_bag(path, *, robot: str = "circle", map_name: str = "recorded",
     grid = grid_from_occupancy_message(data["/map"][-1][1], name=map_name)
     footprint = make_footprint(robot)
     goals, goals_from = _goals(data, topics, path)
-    if data.get("/odom"):
-        odom = [(t * 1e-9, stamp_seconds(m.header.stamp), m.pose.pose.position.x,
-                 m.pose.pose.position.y, quaternion_yaw(m.pose.pose.orientation))
-                for t, m in data["/odom"]]
-        frames = {m.header.frame_id.lstrip("/") for _, m in data["/odom"]} - {"", GLOBAL_FRAME}
-        if frames:  # a robot's odometry (REP-105): placed in map through the recorded tf
-            odom = _in_global_frame(
-                odom, [m.header.frame_id.lstrip("/") for _, m in data["/odom"]], data, path)
-        poses_from = "odom"
-    else:  # a robot recorded without odometry: its base frame's pose from tf
-        odom, poses_from = _poses_from_tf(data, base_frame, topics, path), "tf"
+    records = [odometry_record(t, m) for t, m in data.get("/odom", [])]
+    odom, poses_from = robot_poses([r[0] for r in records], [r[1] for r in records], data,
+                                   topics, path, base_frame)
     if data.get("/collision"):
         collisions = [(t * 1e-9, float(m.data)) for t, m in data["/collision"]]
         contacts_from = "simulator"

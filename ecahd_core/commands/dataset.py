@@ -39,7 +39,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="rule of SD's sparse waypoints: arclength (the paper's, evenly spaced), "
                         "corners (the path's corners kept, the rest evenly on its legs), auto "
                         "(corners when the expert's median waypoint spacing exceeds 1.5 m)")
-    p.add_argument("--out", required=True, help="dataset file to write (.npz)")
+    p.add_argument("--out", default=None,
+                   help="dataset file to write (.npz); required for the A* expert data")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -47,8 +48,11 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from ecahd_core.dataset import generate_dataset, median_spacing, waypoint_rule
+    from ecahd_core.errors import DatasetError
     from ecahd_core.maps import load_map
 
+    if args.out is None:
+        raise DatasetError("--out FILE is required (the .npz to write)")
     grid = load_map(args.map, args.resolution)
     grid.require_free_space()
     t0 = time.perf_counter()
