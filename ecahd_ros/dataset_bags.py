@@ -59,9 +59,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="[s] a longer time without a pose cuts")
     g.add_argument("--max-speed", type=float, default=d.max_speed,
                    help="[m/s] a pose jump farther than this allows (+ 0.25 m) is a teleport")
-    g.add_argument("--loop-ratio", type=float, default=d.loop_ratio,
-                   help="a demonstration loops when a stretch of it is longer than this x "
-                        "its straight distance + 2 m")
+    g.add_argument("--loop-length", type=float, default=d.loop_length,
+                   help="[m] a demonstration loops when it comes back within the robot's "
+                        "radius of where it was after more driving than this")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -126,7 +126,7 @@ def run_from_bags(args: argparse.Namespace) -> int:
     footprint = make_footprint(args.robot)
     config = DemoConfig(min_distance=args.min_distance, stop_time=args.stop_time,
                         stop_radius=args.stop_radius, max_gap=args.max_gap,
-                        max_speed=args.max_speed, loop_ratio=args.loop_ratio)
+                        max_speed=args.max_speed, loop_length=args.loop_length)
     out = Path(args.out or f"{grid.name}_demonstrations.npz")
     for bag in args.from_bags:
         if not Path(bag).is_dir():
@@ -215,6 +215,6 @@ def _save_figure(fig, path: Path) -> None:
 
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp")
-    fig.savefig(tmp, dpi=110, format="png")
+    fig.savefig(tmp, dpi=110, format="png", bbox_inches="tight")
     pyplot().close(fig)
     os.replace(tmp, path)

@@ -121,16 +121,20 @@ def test_a_stretch_through_a_wall_is_cut_out_and_counted():
 def test_too_short_and_looping_are_dropped_and_corners_and_u_turns_are_not():
     result = _cut(drive([(1, 2), (3.5, 2)]))  # 2.5 m < 3 m
     assert result.counts["too_short"] == 1 and not result.kept
-    # up a 6 m corridor and back: the stretch (2, 2) -> (2, 3) is 13 m long, 1 m apart
-    result = _cut(drive([(2, 2), (8, 2), (8, 3), (2, 3)]))
+    # up a 6 m dead end and back 0.3 m to the side: back within the robot's 0.4 m of where it
+    # was after 12 m; the same 1 m to the side (two passes either side of a wall) stays
+    result = _cut(drive([(2, 2), (8, 2), (8, 2.3), (2, 2.3)]))
     assert result.counts["looping"] == 1 and not result.kept
+    assert len(_cut(drive([(2, 2), (8, 2), (8, 3), (2, 3)])).kept) == 1
     th = np.linspace(0, 2 * np.pi, 200)
-    assert loops(np.c_[5 + 1.5 * np.cos(th), 5 + 1.5 * np.sin(th)])  # a circle
-    # a U-turn of radius 1 m: the half circle is pi m for a 2 m chord (< 3 x 2 + 2)
+    assert loops(np.c_[5 + 1.5 * np.cos(th), 5 + 1.5 * np.sin(th)], radius=0.4)  # a circle
+    # a U-turn of radius 1 m: the legs are 2 m apart
     half = np.linspace(-np.pi / 2, np.pi / 2, 50)
-    u = np.concatenate([[[4, -1]], np.c_[5 + np.cos(half), np.sin(half)], [[4, 1]]])
-    assert not loops(u + [2, 5])  # 1 + pi + 1 m for 2 m: 5.1 < 8
-    assert not loops(np.array([[1, 2], [8, 2], [8, 8]]))  # a corner
+    u = np.concatenate([[[0, -1]], np.c_[5 + np.cos(half), np.sin(half)], [[0, 1]]])
+    assert not loops(u + [2, 5], radius=0.4)
+    assert not loops(np.array([[1, 2], [8, 2], [8, 8]]), radius=0.4)  # a corner
+    # a circle of 0.4 m radius (2.5 m round) is no longer than the 3 m of loop_length
+    assert not loops(np.c_[5 + 0.4 * np.cos(th), 5 + 0.4 * np.sin(th)], radius=0.4)
 
 
 def test_coverage_of_a_line_on_an_open_map():
