@@ -21,6 +21,19 @@ ROS_DOMAIN_ID = 60 + os.getpid() % 100  # 60..159, valid for Fast DDS
 
 
 @pytest.fixture
+def one_torch_thread():
+    """One torch thread for the test: tiny models' steps take 10x longer with two threads
+    contending with other work on a 2-core machine. Use with ``pytestmark =
+    pytest.mark.usefixtures("one_torch_thread")``."""
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+@pytest.fixture
 def ros_domain_id() -> int:
     """The DDS domain of this test process (for child processes that must join it)."""
     return ROS_DOMAIN_ID

@@ -21,12 +21,7 @@ from ecahd_core.planning.sparse import SparseConfig, SparseDiffusion
 START, GOAL = (1.5, 1.5), (6.5, 5.5)  # free cells of maze2d-large
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.fixture(scope="module")

@@ -14,13 +14,7 @@ from ecahd_core.general.train import (GeneralTrainConfig, GroupedData, evaluate_
 from ecahd_ros.cli import main
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """One torch thread (the machine's other core is busy; as test_general_views)."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def tiny_config() -> GeneralDenoiserConfig:

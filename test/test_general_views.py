@@ -18,14 +18,7 @@ from ecahd_core.mapgen import MapGenConfig, generate_map
 PROBLEM = ViewConfig(extent="problem")
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """One torch thread: the tiny models' steps take 10x longer with two threads contending
-    with other work on a 2-core machine."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def wall_grid(origin=(0.0, 0.0)) -> GridMap:

@@ -11,12 +11,7 @@ from ecahd_core.general.segment_dd import (SEGMENT_NORMALIZER, SegmentNormalizer
                                            to_segment_frame, train_segment_dd)
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def test_segment_frame_of_hand_made_segments():

@@ -61,6 +61,22 @@ class RowNormalizer:
         return grad_metres * h
 
 
+def condition_ends(conditions: Mapping[int, Any], batch: int, horizon: int, device,
+                   missing: str) -> dict[int, Tensor]:
+    """Sampling conditions {index: (2,) or (batch, 2) [m]} -> {index in 0..horizon-1:
+    (batch, 2) float32}; PlanningError ``missing`` unless the first (0) and last (horizon - 1)
+    are among them (the generalists' samplers are made round a row's two ends)."""
+    ends = {}
+    for index, value in conditions.items():
+        if not -horizon <= int(index) < horizon:
+            raise TrajectoryError(f"condition index {index} is outside a horizon of {horizon}")
+        ends[int(index) % horizon] = torch.as_tensor(value, dtype=torch.float32,
+                                                     device=device).expand(batch, 2)
+    if 0 not in ends or horizon - 1 not in ends:
+        raise PlanningError(missing)
+    return ends
+
+
 def gather_memory(memory: MapMemory, index: Tensor) -> MapMemory:
     """The memory of U problems -> that of B rows (``index`` (B,) long in 0..U-1)."""
     return MapMemory(keys=tuple(k.index_select(0, index) for k in memory.keys),
@@ -98,14 +114,9 @@ class GeneralSampler(DiffusionSampler):
         if model_kwargs:
             raise ValueError("the generalist's only model input is its map memory")
         device = self.device
-        ends = {}
-        for index, value in conditions.items():
-            key = int(index) % horizon if -horizon <= int(index) < horizon else None
-            ends[key] = torch.as_tensor(value, dtype=torch.float32, device=device) \
-                .expand(batch, 2)
-        if 0 not in ends or horizon - 1 not in ends:
-            raise PlanningError("the generalist SD needs the start (index 0) and the goal "
-                                "(index -1) as conditions: its views are made round them")
+        ends = condition_ends(conditions, batch, horizon, device,
+                              "the generalist SD needs the start (index 0) and the goal "
+                              "(index -1) as conditions: its views are made round them")
         starts, goals = ends[0], ends[horizon - 1]
         if not (torch.isfinite(starts).all() and torch.isfinite(goals).all()):
             raise TrajectoryError("start or goal is not finite")
@@ -121,7 +132,7 @@ class GeneralSampler(DiffusionSampler):
         normalizer = RowNormalizer(
             torch.as_tensor(frame.centre, dtype=torch.float32, device=device)[index],
             torch.as_tensor(frame.half_side, dtype=torch.float32, device=device)[index])
-        conditions = {i: v for i, v in ends.items() if i is not None}
+        conditions = ends
         if warm_start is not None:
             warm_start = torch.as_tensor(warm_start, dtype=torch.float32, device=device) \
                 .expand(batch, horizon, 2)

@@ -38,7 +38,7 @@ from torch import Tensor
 
 from ecahd_core.diffusion.normalizer import Normalizer
 from ecahd_core.diffusion.sampler import DiffusionSampler, sample
-from ecahd_core.errors import PlanningError, TrajectoryError
+from ecahd_core.errors import TrajectoryError
 
 log = logging.getLogger(__name__)
 
@@ -123,20 +123,16 @@ class SegmentSampler(DiffusionSampler):
                generator: torch.Generator | None = None, guide=None, guide_steps=None,
                return_intermediates: bool = False, model_kwargs: Mapping[str, Any] | None = None,
                warm_start: Any = None, warm_fraction: float | None = None):
-        device = self.device
-        ends = {}
-        for index, value in conditions.items():
-            key = int(index) % horizon if -horizon <= int(index) < horizon else None
-            ends[key] = torch.as_tensor(value, dtype=torch.float32, device=device) \
-                .expand(batch, 2)
-        if 0 not in ends or horizon - 1 not in ends:
-            raise PlanningError("a segment-frame DD needs the segment's start (index 0) and end "
-                                "(index -1) as conditions")
+        from ecahd_core.general.sampler import condition_ends
+
+        ends = condition_ends(conditions, batch, horizon, self.device,
+                              "a segment-frame DD needs the segment's start (index 0) and end "
+                              "(index -1) as conditions")
         normalizer = SegmentNormalizer(ends[0], ends[horizon - 1], self.normalizer)
         warm_steps, guide_steps = self.steps(warm_start, warm_fraction, guide_steps)
         c = self.config
         return sample(self.model, self.scheduler, normalizer, batch=batch, horizon=horizon,
-                      conditions={i: v for i, v in ends.items() if i is not None},
+                      conditions=ends,
                       num_steps=c.num_steps, eta=c.eta, generator=generator, guide=guide,
                       guidance_weight=c.guidance_weight, guide_steps=guide_steps,
                       max_guide_norm=c.max_guide_norm, guidance_space=c.guidance_space,
