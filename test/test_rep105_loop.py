@@ -162,3 +162,53 @@ def test_navigate_to_pose_drives_there_and_turns_to_the_heading(ros_context):
     finally:
         client.destroy()
         loop.close()
+
+
+def test_an_updated_map_with_a_block_across_the_corridor_is_driven_round(ros_context, tmp_path):
+    """Issue 40's map change with the site's own models: the robot is under way along the
+    y = 5.5 corridor when an edited map arrives with a block wall to wall across it (and the
+    block stands in the simulator); both nodes take the update without a restart, the planner
+    plans round it at once (the block is a wall SD never learnt: detoured), and the robot
+    reaches the goal by another corridor without touching anything."""
+    import numpy as np
+    from nav_msgs.msg import OccupancyGrid, Path
+
+    from ecahd_core.collision import check_collision
+    from ecahd_core.footprint import make_footprint
+    from ecahd_core.maps import GridMap, builtin_map
+    from ecahd_core.scenario import write_scenario, parse_obstacle
+    from ecahd_ros.conversions import grid_to_msg, path_to_xy
+    from ecahd_ros.qos import MAP_QOS, PLAN_QOS
+
+    site = builtin_map("maze2d-large")
+    data = site.data.copy()
+    data[50:60, 35:40] = 100  # x in [3.5, 4.0], y in [5, 6]: the corridor closed
+    updated = GridMap(data, site.resolution, site.origin, name=site.name)
+    box = parse_obstacle({"shape": "box", "x": 3.75, "y": 5.5, "size": [0.46, 0.98]})
+    scenario = write_scenario(tmp_path / "block.yaml", [box])
+    loop = Loop(ros_context, obstacles_file=str(scenario))
+    plans = []
+    loop.probe.create_subscription(Path, "plan", plans.append, PLAN_QOS)
+    map_pub = loop.probe.create_publisher(OccupancyGrid, "map", MAP_QOS)
+    block = GridMap(np.where(updated.occupied & ~site.occupied, 100, 0).astype(np.int8),
+                    site.resolution, site.origin, name="block")
+    robot = make_footprint("circle")
+    try:
+        loop.spin_until(lambda: loop.planner.ready and loop.planner.pose is not None,
+                        "planner ready")
+        loop.send_goal()
+        loop.spin_until(lambda: plans and loop.state.x > START[0] + 0.3, "the robot under way")
+        n = len(plans)
+        t0 = time.monotonic()
+        map_pub.publish(grid_to_msg(updated))
+        loop.spin_until(lambda: len(plans) > n, "a plan on the updated map")
+        latency = time.monotonic() - t0
+        new = path_to_xy(plans[-1])
+        assert check_collision(new, robot, block).collision_free  # planned round the block
+        loop.spin_until(lambda: loop.refiner.map_changed > 0, "the refiner took the update")
+        loop.spin_until(loop.at_goal, "the robot at the goal round the block")
+        assert loop.state.contact_count == 0
+        assert loop.planner.map_changed == pytest.approx(loop.refiner.map_changed)
+        print(f"map update to a plan round the block: {latency * 1e3:.0f} ms (wall)")
+    finally:
+        loop.close()

@@ -442,8 +442,8 @@ class OnlinePlanner:
             if self._crosses_remembered(waypoints):  # SD cannot see round it: detour now
                 method, sparse, follow = "fallback_astar", None, 1
                 waypoints = self._fallback(start, goal)
-                detail = " (SD's best crossed an obstacle the scans found)" + \
-                    self._fallback_detail()
+                detail = (" (SD's best crossed an obstacle the scans found or a wall added "
+                          "since the map its model learnt)" + self._fallback_detail())
         elif method == "astar":
             waypoints = self._astar(start, goal)
         else:
