@@ -35,6 +35,13 @@ HELD_OUT_MAPS = tuple(f"{kind}:{size}:0.05:{7000 + i}"
     + ("maze2d-large",)
 
 
+# our rules that can be switched off, as ``ecahd bench planning``'s settings (docs/rules.md)
+RULES_OFF = {"placement": {"place_reach": 0.0}, "leg-batches": {"leg_batches": -1},
+             "backtracks": {"backtracks": 0}, "subgoals": {"subgoals": False},
+             "settle": {"settle": False}, "exact-rule": {"exact_rule": False},
+             "polish": {"polish_steps": 0}, "keep-better": {"keep_better": False}}
+
+
 @dataclass(frozen=True, kw_only=True)
 class GeneralBenchSettings:
     maps: tuple[str, ...] = HELD_OUT_MAPS
@@ -44,6 +51,7 @@ class GeneralBenchSettings:
     robots: tuple[str, ...] = ("circle", "quadruped", "humanoid")
     sd_model: str | None = "general"
     dd_model: str | None = "general"
+    off: tuple[str, ...] = ()  # rules switched off (RULES_OFF)
 
 
 @dataclass
@@ -69,6 +77,10 @@ def run_general_benchmark(settings: GeneralBenchSettings, *, progress: bool = Tr
 
     if settings.problems < 1 or not settings.maps:
         raise EcahdError("need at least one map and one problem")
+    unknown = sorted(set(settings.off) - set(RULES_OFF))
+    if unknown:
+        raise EcahdError(f"unknown rule(s) {unknown}; known: {sorted(RULES_OFF)}")
+    overrides = {k: v for rule in settings.off for k, v in RULES_OFF[rule].items()}
     result = GeneralBenchResult(settings=settings)
     t0 = time.perf_counter()
     for spec in settings.maps:
@@ -76,7 +88,8 @@ def run_general_benchmark(settings: GeneralBenchSettings, *, progress: bool = Tr
             map=spec, problems=settings.problems, seed=settings.seed,
             sample_seed=settings.sample_seed, per_problem_seeds=True,
             robots=tuple(settings.robots), methods=("hd",), guidance="on", ablation=False,
-            sd_model=settings.sd_model, dd_model=settings.dd_model), progress=progress)
+            sd_model=settings.sd_model, dd_model=settings.dd_model, **overrides),
+            progress=progress)
         for cell in r.cells:
             result.cells.append({"map": spec, "family": family_of(spec), **cell.to_dict()})
             log.info("%s %s: alone %.1f%%, net %.1f%%, fallback %.1f%%, %.0f ms median", spec,
@@ -116,7 +129,8 @@ def format_table(result: GeneralBenchResult) -> str:
     s = result.settings
     lines = [f"ECAHD with SD {s.sd_model or 'per map'} and DD {s.dd_model or 'per map'} on "
              f"{len(s.maps)} maps, {s.problems} problems each (seed {s.seed}, sampling seed "
-             f"{s.sample_seed} per problem), {result.seconds / 60:.1f} min", "",
+             f"{s.sample_seed} per problem), rules off: {', '.join(s.off) or 'none'}, "
+             f"{result.seconds / 60:.1f} min", "",
              "| family | robot | maps | problems | ECAHD alone % | with the net % | A* fallback "
              "% | unsafe % | median ms | p95 ms | length / A* median | p99 |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -143,6 +157,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="SD: 'general', a file, or 'map' (each map's own)")
     parser.add_argument("--dd-model", default=d.dd_model, metavar="CKPT",
                         help="DD: 'general', a file, or 'map' (each map's own)")
+    parser.add_argument("--off", nargs="+", default=[], choices=sorted(RULES_OFF),
+                        metavar="RULE", help=f"switch rules off: {', '.join(sorted(RULES_OFF))}")
     parser.add_argument("--json", metavar="FILE", help="also write every cell as JSON")
     parser.add_argument("--md", metavar="FILE", help="also write the table as markdown")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
@@ -155,7 +171,7 @@ def run(args: argparse.Namespace) -> int:
     result = run_general_benchmark(GeneralBenchSettings(
         maps=tuple(args.maps), problems=args.problems, seed=args.seed,
         sample_seed=args.sample_seed, robots=tuple(args.robots),
-        sd_model=model(args.sd_model), dd_model=model(args.dd_model)),
+        sd_model=model(args.sd_model), dd_model=model(args.dd_model), off=tuple(args.off)),
         progress=not args.no_progress)
     table = format_table(result)
     print(table)
