@@ -391,6 +391,52 @@ class ExpertDataset:
         return dataset
 
 
+def mix_datasets(demos: ExpertDataset, expert: ExpertDataset, share: float, *,
+                 seed: int = 0) -> ExpertDataset:
+    """Demonstrations (``ecahd dataset --from-bags``) and A* expert data of the same map mixed
+    so that ``share`` (0 < share < 1) of the pairs are demonstrations: as many pairs as the two
+    allow at that share (the larger side subsampled without replacement, seeded), demonstrations
+    first. Demonstrations rarely cover every start/goal pair; the expert fills the gaps.
+    Raises DatasetError when the maps, P^g, P^l or the full points differ."""
+    if not 0.0 < share < 1.0:
+        raise DatasetError(f"the demonstrations' share must be in (0, 1), got {share}")
+    if demos.map_fingerprint != expert.map_fingerprint:
+        raise DatasetError(f"the demonstrations are on map {demos.map_name!r} "
+                           f"({demos.map_fingerprint}), the expert data on {expert.map_name!r} "
+                           f"({expert.map_fingerprint}): mix data of one map")
+    shapes = [(d.sparse_horizon, d.dense_points, d.full.shape[1]) for d in (demos, expert)]
+    if shapes[0] != shapes[1]:
+        raise DatasetError(f"(P^g, P^l, full points) differ: demonstrations {shapes[0]}, "
+                           f"expert {shapes[1]}")
+    total = min(demos.num_pairs / share, expert.num_pairs / (1.0 - share))
+    n_demo = max(1, min(demos.num_pairs, int(round(share * total))))
+    n_expert = max(1, min(expert.num_pairs, int(round(total)) - n_demo))
+    rng = np.random.default_rng(seed)
+    picks = [np.sort(rng.choice(d.num_pairs, size=n, replace=False))
+             for d, n in ((demos, n_demo), (expert, n_expert))]
+    Pg = demos.sparse_horizon
+
+    def cat(get):
+        return np.concatenate([get(d, i) for d, i in zip((demos, expert), picks)])
+
+    def dense_rows(d, i):  # pair i's P^g - 1 segments
+        return d.dense.reshape(d.num_pairs, Pg - 1, *d.dense.shape[1:])[i] \
+            .reshape(-1, *d.dense.shape[1:])
+
+    params = dict(expert.params, mixed={
+        "share": float(share), "seed": int(seed), "demonstrations": n_demo,
+        "expert": n_expert, "demonstrations_sha256": demos.sha256,
+        "expert_sha256": expert.sha256, "demonstrations_params": demos.params})
+    return ExpertDataset(
+        sparse=cat(lambda d, i: d.sparse[i]),
+        sparse_h={h: cat(lambda d, i, h=h: d.sparse_h[h][i]) for h in expert.sparse_h},
+        dense=cat(dense_rows), full=cat(lambda d, i: d.full[i]),
+        starts=cat(lambda d, i: d.starts[i]), goals=cat(lambda d, i: d.goals[i]),
+        lengths=cat(lambda d, i: d.lengths[i]), map_data=expert.map_data,
+        map_resolution=expert.map_resolution, map_origin=expert.map_origin,
+        map_name=expert.map_name, map_fingerprint=expert.map_fingerprint, params=params)
+
+
 def _read_dataset_arrays(npz, path: Path) -> dict:
     """The constructor arguments of ExpertDataset from an open NpzFile, checking kind/version."""
     where = repr(str(path))

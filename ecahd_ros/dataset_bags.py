@@ -2,6 +2,7 @@
 ``--from-bags`` demonstrations from the robot's own recorded driving.
 
     ecahd dataset --from-bags run1/ run2/ --map site.yaml [--out demos.npz] [--png coverage.png]
+    ecahd dataset --mix demos.npz expert.npz --share 0.5 --out mixed.npz
 
 Each bag's robot pose comes as ``ecahd eval-bag`` reads it (``ecahd_ros.eval_bag``: the
 namespace auto-detected or ``--namespace``; ``odom`` in ``map``, or in another frame placed
@@ -44,6 +45,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group(
         "demonstrations (--from-bags; --pairs, --seed, --expert and --workers do not apply, "
         "--min-distance is the shortest demonstration kept)")
+    g.add_argument("--mix", nargs=2, default=None, metavar=("DEMOS", "EXPERT"),
+                   help="mix a demonstrations dataset and an A* expert dataset of one map so "
+                        "that --share of the pairs are demonstrations (--out, --seed)")
+    g.add_argument("--share", type=float, default=0.5,
+                   help="with --mix: the demonstrations' share of the pairs")
     g.add_argument("--from-bags", nargs="+", default=None, metavar="BAG",
                    help="rosbag2 folders (MCAP or SQLite3) of the robot driving on --map")
     g.add_argument("--png", default=None, help="write the coverage figure here")
@@ -65,11 +71,30 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.mix:
+        return run_mix(args)
     if not args.from_bags:
         from ecahd_core.commands.dataset import run as run_expert
 
         return run_expert(args)
     return run_from_bags(args)
+
+
+def run_mix(args: argparse.Namespace) -> int:
+    """``--mix DEMOS EXPERT --share S --out F``: ``dataset.mix_datasets``."""
+    from ecahd_core.dataset import ExpertDataset, mix_datasets
+    from ecahd_core.errors import DatasetError
+
+    if not args.out:
+        raise DatasetError("--mix needs --out FILE")
+    demos, expert = (ExpertDataset.load(p) for p in args.mix)
+    mixed = mix_datasets(demos, expert, args.share, seed=args.seed)
+    mixed.save(args.out)
+    m = mixed.params["mixed"]
+    print(f"{args.out}: {m['demonstrations']} demonstrations of {demos.num_pairs} + "
+          f"{m['expert']} expert paths of {expert.num_pairs} on {mixed.map_name!r} "
+          f"(share {args.share:g})")
+    return 0
 
 
 # ------------------------------------------------------------------------------ one bag

@@ -13,7 +13,7 @@ from ecahd_core.demonstrations import (DemoConfig, PoseStream, check_map_matches
                                        cut_demonstrations, demonstrations_dataset, loops)
 from ecahd_core.errors import DatasetError
 from ecahd_core.footprint import make_footprint
-from ecahd_core.maps import GridMap, save_nav2_yaml
+from ecahd_core.maps import GridMap, builtin_map, save_nav2_yaml
 from ecahd_ros.cli import main
 from test_eval_bag_no_rclpy import TS, T, _header, _pose, _tf
 
@@ -309,3 +309,31 @@ def test_a_bag_copy_reads_the_same(tmp_path):
     scan = scan_bag(tmp_path / "bag", lambda t: True,
                     lambda topic, t, m: got.__setitem__(topic, got.get(topic, 0) + 1))
     assert got == bag_topics(tmp_path / "bag") and not scan.damaged
+
+
+def test_demonstrations_mixed_with_expert_data_at_a_share(tmp_path, site, capsys):
+    """``ecahd dataset --mix DEMOS EXPERT --share S``: as many pairs as the two allow at that
+    share, the demonstrations' rows whole (their segments with them); another map is refused."""
+    from ecahd_core.dataset import generate_dataset
+
+    rows = _routes()
+    write_drive_bag(tmp_path / "mcap", rows)
+    demos = tmp_path / "demos.npz"
+    assert main(["dataset", "--from-bags", str(tmp_path / "mcap"), "--map", str(site),
+                 "--out", str(demos), "--waypoints", "arclength"]) == 0
+    expert = generate_dataset(_grid(), pairs=6, seed=1, progress=False,
+                              waypoints="arclength").save(tmp_path / "expert.npz")
+    out = tmp_path / "mixed.npz"
+    assert main(["dataset", "--mix", str(demos), str(expert), "--share", "0.5",
+                 "--out", str(out)]) == 0
+    d, e, m = (ExpertDataset.load(p) for p in (demos, expert, out))
+    assert d.num_pairs == 2  # one bag of the driving above
+    assert m.num_pairs == 4 and m.params["mixed"]["demonstrations"] == 2  # min(2/0.5, 6/0.5)
+    np.testing.assert_array_equal(m.sparse[:2], d.sparse)
+    np.testing.assert_array_equal(m.dense[:18], d.dense)  # 2 pairs x 9 segments
+    assert all(any(np.array_equal(row, x) for x in e.sparse) for row in m.sparse[2:])
+    assert "2 demonstrations of 2 + 2 expert paths of 6" in capsys.readouterr().out
+    other = generate_dataset(builtin_map("maze2d-umaze"), pairs=2, seed=1, progress=False) \
+        .save(tmp_path / "other.npz")
+    assert main(["dataset", "--mix", str(demos), str(other), "--out", str(out)]) == 2
+    assert "mix data of one map" in capsys.readouterr().err
