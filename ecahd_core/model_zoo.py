@@ -280,11 +280,21 @@ def _general_file(kind: str) -> Path:
 
 
 def _own_general(kind: str, map_name: str) -> Path | None:
-    """The map's shipped model of ``kind`` when it is a generalist fine-tuned on the map
-    (``ecahd train-general --map ... --from general --ship <map>_sd.pt``), else None."""
+    """The generalist that serves ``map_name`` when no model is named: the map's shipped model
+    of ``kind`` when it is a generalist fine-tuned on the map (``ecahd train-general --map ...
+    --from general --ship <map>_sd.pt``); the shipped generalist when the map has no model of
+    its own; else None (the map's own per-map model, or the error naming what is missing)."""
+    if kind not in GENERAL_FILES:
+        return None
     path = shipped_path(map_name, kind)
-    return path if kind in GENERAL_FILES and path.is_file() and \
-        read_general(kind, path) is not None else None
+    if path.is_file():
+        return path if read_general(kind, path) is not None else None
+    general = general_path(kind)
+    if general.is_file():
+        log.info("no %s model of map %r: the generalist %s plans on it", kind.upper(),
+                 map_name, general)
+        return general
+    return None
 
 
 def _file_stamp(path: Path) -> tuple:
@@ -344,9 +354,9 @@ def load_sd(grid, *, path: str | Path | None = None, footprint=None,
     which plans on any map (``general.GeneralCheckpoint``, for ``SparseDiffusion``).
 
     Args:
-        path: None: the map's shipped model; ``GENERAL`` ("general"): the shipped generalist
-            (:func:`general_path`); a file: that checkpoint, per-map or generalist by its
-            format.
+        path: None: the map's shipped model, else the shipped generalist (:func:`_own_general`);
+            ``GENERAL`` ("general"): the shipped generalist (:func:`general_path`); a file: that
+            checkpoint, per-map or generalist by its format.
         footprint, horizon, device: as :func:`load_model`. The generalist learnt one robot's
             clearance (its data's ``robot``) and plans for any footprint: J's selection, the
             placer, DD and the exact checker judge the footprint itself.
@@ -367,12 +377,13 @@ def load_dd(grid, *, path: str | Path | None = None, footprint=None, device: str
     generalist (``general.segment_dd``), which refines segments on any map.
 
     Args:
-        path: None: the map's shipped DD; ``GENERAL``: the shipped generalist
-            (:func:`general_path`); a file: that checkpoint, per-map or segment-frame by its
-            meta.
+        path: None: the map's shipped DD, else the shipped generalist; ``GENERAL``: the
+            shipped generalist (:func:`general_path`); a file: that checkpoint, per-map or
+            segment-frame by its meta.
     Raises:
         CheckpointError naming the file and the problem.
     """
+    path = _own_general("dd", grid.name) if path is None else path
     general = None if path is None else read_general("dd", path, device=device)
     if general is None:
         return load_model("dd", grid, path=path, footprint=footprint, device=device)

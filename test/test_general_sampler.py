@@ -119,3 +119,22 @@ def test_a_problem_wider_than_the_views_is_named(tiny_general):
     sd = SparseDiffusion.for_map(grid, make_footprint("circle"), model=str(tiny_general))
     with pytest.raises(PlanningError, match="over the 96 m"):
         sd.plan((1.0, 10.0), (119.0, 10.0))
+
+
+def test_a_map_without_a_model_of_its_own_gets_the_generalist(tiny_general, tmp_path,
+                                                               monkeypatch):
+    """No model named and none for the map: the generalist on the search path serves it (SD
+    and the nodes' start-up check); a map with its own per-map model keeps it."""
+    import shutil
+
+    from ecahd_core.model_zoo import check_model, is_general
+
+    models = tmp_path / "models"
+    models.mkdir()
+    shutil.copy(tiny_general, models / "general_sd.pt")
+    monkeypatch.setenv("ECAHD_MODELS", str(models))
+    umaze = builtin_map("maze2d-umaze")  # no per-map model ships for it
+    assert isinstance(load_sd(umaze), GeneralCheckpoint)
+    assert check_model("sd", "maze2d-umaze", horizon=10) == models / "general_sd.pt"
+    assert is_general("sd", "", "maze2d-umaze") and not is_general("sd", "", "maze2d-large")
+    assert not isinstance(load_sd(builtin_map("maze2d-large")), GeneralCheckpoint)
