@@ -19,6 +19,18 @@ ROTATE_GAIN = 2.0  # [1/s] w = gain * alpha when turning on the spot
 RESAMPLE_STEP = 0.05  # [m] spacing of the path points the lookahead search walks
 
 
+def unicycle_step(x: float, y: float, yaw: float, v: float, w: float,
+                  dt: float) -> tuple[float, float, float]:
+    """Exact unicycle motion for constant v [m/s], w [rad/s] over dt [s] -> (x, y, yaw) (the
+    simulator's kinematics, ``sim_bridge.sim``; the operator's, ``ecahd_core.operator``)."""
+    if abs(w) < 1e-9:
+        return x + v * dt * math.cos(yaw), y + v * dt * math.sin(yaw), yaw
+    yaw1 = yaw + w * dt
+    return (x + v / w * (math.sin(yaw1) - math.sin(yaw)),
+            y - v / w * (math.cos(yaw1) - math.cos(yaw)),
+            yaw1)
+
+
 def straight_local_plan(a: np.ndarray, b: np.ndarray, points: int) -> np.ndarray:
     """LocalPlan(a, b): (points, 2) [m] evenly spaced from a to b, both included."""
     frac = np.linspace(0.0, 1.0, points)[:, None]

@@ -16,6 +16,15 @@ the first point at t = 0 and goes back and forth along the polyline at that spee
 obstacle is kinematic: it passes through walls, other obstacles and the robot (an overlap with the
 robot is a contact), so give it a path through free space.
 
+A scenario may also mark **zones** (issue 41): areas of free floor a site's operators never
+drive through (a loading bay, a wet floor), each a polygon of at least 3 [x, y] vertices [m] in
+the map frame, with an optional name. The simulator ignores them (they are not obstacles);
+``ecahd record-demos --habit zone`` drives round them and ``ecahd_core.operator.habit_metrics``
+counts the paths that enter one::
+
+    zones:
+      - {name: loading_bay, polygon: [[2.0, 1.0], [5.0, 1.0], [5.0, 3.0], [2.0, 3.0]]}
+
 Bad entries do not spoil the others: :func:`parse_obstacles` returns the good obstacles and one
 error line per bad entry, naming its index and content (unknown shape or key, a missing field,
 a NaN, a non-positive size / radius / speed, a path of fewer than 2 points or zero length).
@@ -37,6 +46,8 @@ from ecahd_core.footprint import point_segment_distance
 SHAPES = ("box", "cylinder")
 CYLINDER_POLYGON_SIDES = 32  # footprint polygon of a cylinder (circumscribed, so never smaller)
 _KEYS = {"shape", "x", "y", "yaw", "size", "radius", "path", "speed"}
+_DOCUMENT_KEYS = ("obstacles", "zones")  # the top-level keys of a scenario file
+_ZONE_KEYS = {"name", "polygon"}
 
 
 class ScenarioError(EcahdError):
@@ -212,9 +223,10 @@ def parse_obstacles(data) -> tuple[list[Obstacle], list[str]]:
     if not isinstance(data, dict):
         raise ScenarioError(f"a scenario must be a mapping with an 'obstacles' list, "
                             f"got {type(data).__name__}")
-    unknown = sorted(set(map(str, data)) - {"obstacles"})
+    unknown = sorted(set(map(str, data)) - set(_DOCUMENT_KEYS))
     if unknown:
-        raise ScenarioError(f"unknown scenario key(s) {', '.join(unknown)} (allowed: obstacles)")
+        raise ScenarioError(f"unknown scenario key(s) {', '.join(unknown)} "
+                            f"(allowed: {', '.join(_DOCUMENT_KEYS)})")
     entries = data.get("obstacles") or []
     if not isinstance(entries, list):
         raise ScenarioError(f"scenario 'obstacles' must be a list, got {type(entries).__name__}")
@@ -255,14 +267,96 @@ def load_scenario(path: str | os.PathLike) -> list[Obstacle]:
     return obstacles
 
 
-def write_scenario(path: str | os.PathLike, obstacles) -> Path:
-    """Write obstacles as a scenario YAML that :func:`load_scenario` reads back equal."""
+@dataclass(frozen=True)
+class Zone:
+    """An area of free floor the operator never enters: ``polygon`` (V, 2) [m], map frame,
+    V >= 3, counter-clockwise; ``name`` for messages and figures."""
+
+    name: str
+    polygon: np.ndarray
+
+    def contains(self, xy) -> np.ndarray:
+        """(N, 2) [m] -> (N,) bool: the point lies inside the polygon (even-odd rule)."""
+        from ecahd_core.footprint import point_in_polygon
+
+        return point_in_polygon(np.asarray(xy, dtype=np.float64).reshape(-1, 2), self.polygon)
+
+
+def parse_zones(data) -> list[Zone]:
+    """The ``zones`` of a loaded scenario document (module docstring) -> [Zone]; [] when it
+    has none. Raises ScenarioError naming the first bad zone (index and content): a zone is
+    a rule the operator must keep, so none is silently left out."""
+    if data is None:
+        return []
+    if not isinstance(data, dict):
+        raise ScenarioError(f"a scenario must be a mapping, got {type(data).__name__}")
+    unknown = sorted(set(map(str, data)) - set(_DOCUMENT_KEYS))
+    if unknown:
+        raise ScenarioError(f"unknown scenario key(s) {', '.join(unknown)} "
+                            f"(allowed: {', '.join(_DOCUMENT_KEYS)})")
+    entries = data.get("zones") or []
+    if not isinstance(entries, list):
+        raise ScenarioError(f"scenario 'zones' must be a list, got {type(entries).__name__}")
+    zones = []
+    for i, entry in enumerate(entries):
+        try:
+            zones.append(_parse_zone(entry, i))
+        except ValueError as exc:
+            raise ScenarioError(f"zone {i} {entry!r}: {exc}") from None
+    return zones
+
+
+def _parse_zone(entry, index: int) -> Zone:
+    from ecahd_core.footprint import _signed_area
+
+    if not isinstance(entry, dict):
+        raise ValueError("must be a mapping {name, polygon}")
+    unknown = sorted(set(map(str, entry)) - _ZONE_KEYS)
+    if unknown:
+        raise ValueError(f"unknown key(s) {', '.join(unknown)} (allowed: name, polygon)")
+    points = entry.get("polygon")
+    if not isinstance(points, list) or len(points) < 3:
+        raise ValueError("polygon must be a list of at least 3 [x, y] points")
+    poly = np.array([_point(p, "polygon point") for p in points], dtype=np.float64)
+    area = _signed_area(poly)
+    if abs(area) < 1e-9:
+        raise ValueError("polygon has zero area")
+    if area < 0:
+        poly = poly[::-1].copy()
+    poly.setflags(write=False)
+    return Zone(name=str(entry.get("name", f"zone {index}")), polygon=poly)
+
+
+def read_zones(path: str | os.PathLike) -> list[Zone]:
+    """The zones of a scenario YAML (:func:`parse_zones`); ScenarioError for a file that
+    cannot be read, is not YAML or has a bad zone."""
+    import yaml
+
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except OSError as exc:
+        raise ScenarioError(f"cannot read scenario {path}: {exc.strerror or exc}") from exc
+    except yaml.YAMLError as exc:
+        raise ScenarioError(f"scenario {path} is not valid YAML: {exc}") from exc
+    try:
+        return parse_zones(data)
+    except ScenarioError as exc:
+        raise ScenarioError(f"scenario {path}: {exc}") from exc
+
+
+def write_scenario(path: str | os.PathLike, obstacles, zones=()) -> Path:
+    """Write obstacles (and zones) as a scenario YAML that :func:`load_scenario` (and
+    :func:`read_zones`) read back equal."""
     import yaml
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    text = yaml.safe_dump({"obstacles": [o.to_dict() for o in obstacles]},
-                          default_flow_style=None, sort_keys=False)
+    doc: dict = {"obstacles": [o.to_dict() for o in obstacles]}
+    if zones:
+        doc["zones"] = [{"name": z.name, "polygon": [[float(x), float(y)] for x, y in z.polygon]}
+                        for z in zones]
+    text = yaml.safe_dump(doc, default_flow_style=None, sort_keys=False)
     path.write_text(text)
     return path
 

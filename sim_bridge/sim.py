@@ -57,6 +57,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ecahd_core.controller import unicycle_step  # the kinematics (shared with record-demos)
 from ecahd_core.errors import SimError
 from ecahd_core.footprint import Footprint, make_footprint
 from ecahd_core.maps import DEFAULT_MAP, DEFAULT_RESOLUTION, GridMap, load_map
@@ -167,17 +168,6 @@ def wrap_angle(a: float) -> float:
     if a <= 0.0:
         a += 2.0 * math.pi
     return a - math.pi
-
-
-def unicycle_step(x: float, y: float, yaw: float, v: float, w: float,
-                  dt: float) -> tuple[float, float, float]:
-    """Exact unicycle motion for constant v [m/s], w [rad/s] over dt [s] -> (x, y, yaw)."""
-    if abs(w) < 1e-9:
-        return x + v * dt * math.cos(yaw), y + v * dt * math.sin(yaw), yaw
-    yaw1 = yaw + w * dt
-    return (x + v / w * (math.sin(yaw1) - math.sin(yaw)),
-            y - v / w * (math.cos(yaw1) - math.cos(yaw)),
-            yaw1)
 
 
 # ------------------------------------------------------------------------------ wall boxes
