@@ -3,6 +3,7 @@
     ecahd plan      plan one path on a map and draw it
     ecahd map       describe a map, export it as Nav2 YAML + PGM, draw it
     ecahd dataset   generate A* expert data for training (--from-bags: the robot's own driving)
+    ecahd record-demos   a scripted operator's driving with a habit, recorded as a bag
     ecahd train     train one diffusion model;  ecahd train-all: a map's dataset and all models
     ecahd train-general   the generalist SD that reads the map, on many generated buildings
     ecahd train-general-dd   the generalist DD, in each segment's own frame
@@ -36,6 +37,9 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
                       "(resumable)"),
     "train-general-dd": ("ecahd_core.commands.train_general:dd",
                          "the generalist DD (in each segment's frame) on generated buildings"),
+    "record-demos": ("ecahd_ros.record_demos",
+                     "a scripted operator with a habit (keep right, no-go zones) driven in "
+                     "simulation, recorded as a bag for dataset --from-bags"),
     "demo": ("ecahd_ros.demo",
              "run the ROS 2 graph through seeded goals, record a bag and score it (Table III)"),
     "eval-bag": ("ecahd_ros.eval_bag",
