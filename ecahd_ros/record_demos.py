@@ -103,20 +103,27 @@ def run(args: argparse.Namespace) -> int:
     target_ticks = int(round(args.hours * 3600 * drive.rate))
     from ecahd_core.astar import sample_free_point
 
-    pose = (*sample_free_point(rng, mask, grid), float(rng.uniform(-math.pi, math.pi)))
-    routes, driven, unreached, tick = [], [], 0, 0
+    start = sample_free_point(rng, mask, grid)
+    pose = (*start, float(rng.uniform(-math.pi, math.pi)))
+    routes, driven, unreached, tick, tries = [], [], 0, 0, 0
     try:
         with tqdm(total=target_ticks, unit="tick", disable=args.no_progress,
                   desc="recording", mininterval=0.5) as bar:
             writer.write(tick, pose, (0.0, 0.0), drive.rate)
             while tick < target_ticks:
+                tries += 1
+                if tries > 1000:
+                    raise EcahdError(f"no goal at least {args.min_distance:g} m from "
+                                     f"{start.round(2).tolist()} that the operator reaches "
+                                     f"in 1000 draws (map {grid.name!r})")
                 goal = sample_free_point(rng, mask, grid)
-                if np.hypot(goal[0] - pose[0], goal[1] - pose[1]) < args.min_distance:
+                if np.hypot(*(goal - start)) < args.min_distance:
                     continue
-                try:
-                    route = operator.plan(pose[:2], goal)
+                try:  # from the last goal (in the mask), the robot within goal_tolerance of it
+                    route = operator.plan(start, goal)
                 except PlanningError:
-                    continue  # the pose ended in a cell without clearance: another goal
+                    continue
+                tries = 0
                 result = drive_route(route.path, pose, drive)
                 for p, tw in zip(result.poses, result.twists):
                     tick += 1
@@ -126,6 +133,7 @@ def run(args: argparse.Namespace) -> int:
                 driven.append(result.poses[:result.moving_ticks + 1, :2])
                 unreached += not result.reached
                 pose = tuple(float(v) for v in result.poses[-1])
+                start = goal
     except BaseException:
         writer.close()
         shutil.rmtree(tmp, ignore_errors=True)
@@ -140,9 +148,9 @@ def run(args: argparse.Namespace) -> int:
     print(f"map {grid.name} ({grid.fingerprint()}), robot {footprint.name}, habit {args.habit}"
           + (f", {len(zones)} zone(s)" if zones else ""))
     print(f"recorded {tick / drive.rate / 3600:.2f} h ({tick + 1} poses at {drive.rate:g} Hz) "
-          f"of {len(routes)} routes in {elapsed:.1f} s; {unreached} route(s) not reached; "
-          f"{sum(not r.offset for r in routes) if args.habit == 'keep-right' else 0} "
-          f"kept A*'s path (no safe shift)")
+          f"of {len(routes)} routes in {elapsed:.1f} s; {unreached} route(s) not reached"
+          + (f"; {sum(not r.offset for r in routes)} kept A*'s path (no safe shift)"
+             if args.habit == "keep-right" else ""))
     print(f"operator, planned: {planned.summary()}")
     print(f"operator, driven:  {drove.summary()}")
     print(f"A*, same pairs:    {astar.summary()}")
