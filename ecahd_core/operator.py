@@ -72,6 +72,7 @@ import numpy as np
 
 from ecahd_core.errors import EcahdError
 
+HABITS = ("keep-right", "zone")  # keep-right: the right half of corridors; zone: zones only
 MAX_CORRIDOR_WIDTH = 4.0  # [m] a wider cross-section is open floor, not a corridor
 CORRIDOR_ROBOTS = 2.0  # a corridor is wider than this many robot diameters
 _RAY_BLOCK = 1 << 22  # bound on (points x ray samples) per vectorised block

@@ -30,9 +30,10 @@ import shutil
 import time
 from pathlib import Path
 
+from ecahd_core.operator import HABITS
+
 log = logging.getLogger("ecahd.record_demos")
 
-HABITS = ("keep-right", "zone")
 DRAWN_ROUTES = 8  # routes drawn by --png
 
 

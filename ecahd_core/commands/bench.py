@@ -24,6 +24,7 @@ from ecahd_core.bench import contention as bench_contention
 from ecahd_core.bench import monitor as bench_monitor
 from ecahd_core.bench import replan as bench_replan
 from ecahd_core.bench import general as bench_general
+from ecahd_core.bench import habits as bench_habits
 from ecahd_core.bench import map_update as bench_map_update
 from ecahd_core.bench.cost import CostBenchSettings
 from ecahd_core.bench.output import write_json
@@ -325,6 +326,10 @@ BENCHMARKS: dict[str, Benchmark] = {
                               "maps of every family: alone, with the net, A* fallback, time, "
                               "length over A*'s",
                          add_arguments=bench_general.add_arguments, run=bench_general.run),
+    "habits": Benchmark(help="plans of SD models trained on A*, demonstrations or both: share "
+                             "on the right half of corridors, in zones, collision-free, "
+                             "success, time, beside A* and the operator",
+                        add_arguments=bench_habits.add_arguments, run=bench_habits.run),
 }
 
 
