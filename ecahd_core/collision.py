@@ -26,7 +26,7 @@ from typing import NamedTuple, Sequence
 import numpy as np
 
 from ecahd_core.errors import FootprintError, TrajectoryError
-from ecahd_core.footprint import Footprint
+from ecahd_core.footprint import Footprint, signed_area
 from ecahd_core.maps import GridMap
 
 DEFAULT_TOLERANCE = 1e-6  # [m] overlaps up to this deep count as touching, not colliding
@@ -265,7 +265,7 @@ def convex_pieces(polygon: np.ndarray) -> list[np.ndarray]:
     poly = _clean_polygon(np.asarray(polygon, dtype=np.float64))
     if len(poly) < 3:
         raise FootprintError("footprint polygon degenerates to fewer than 3 distinct vertices")
-    if _signed_area(poly) < 0:
+    if signed_area(poly) < 0:
         poly = poly[::-1].copy()
     a, b, c = poly, np.roll(poly, -1, axis=0), np.roll(poly, -2, axis=0)
     if np.all(_cross(b - a, c - b) >= 0):
@@ -502,6 +502,3 @@ def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
 
 
-def _signed_area(poly: np.ndarray) -> float:
-    x, y = poly[:, 0], poly[:, 1]
-    return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))

@@ -139,7 +139,7 @@ def polygon_footprint(polygon, *, spacing: float = DEFAULT_SPACING, padding: flo
         raise FootprintError("footprint polygon has non-finite coordinates")
     if padding:
         poly = poly + np.sign(poly) * padding  # Nav2 padFootprint
-    area = _signed_area(poly)
+    area = signed_area(poly)
     if abs(area) < 1e-9:
         raise FootprintError("footprint polygon has zero area")
     if area < 0:
@@ -198,7 +198,8 @@ def point_in_polygon(pts: np.ndarray, poly: np.ndarray) -> np.ndarray:
     return np.sum(crosses & (x < xint), axis=1) % 2 == 1
 
 
-def _signed_area(poly: np.ndarray) -> float:
+def signed_area(poly: np.ndarray) -> float:
+    """The signed area of a polygon (N, 2) [m^2]: positive when counter-clockwise."""
     x, y = poly[:, 0], poly[:, 1]
     return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
 

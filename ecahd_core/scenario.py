@@ -307,7 +307,7 @@ def parse_zones(data) -> list[Zone]:
 
 
 def _parse_zone(entry, index: int) -> Zone:
-    from ecahd_core.footprint import _signed_area
+    from ecahd_core.footprint import signed_area
 
     if not isinstance(entry, dict):
         raise ValueError("must be a mapping {name, polygon}")
@@ -318,7 +318,7 @@ def _parse_zone(entry, index: int) -> Zone:
     if not isinstance(points, list) or len(points) < 3:
         raise ValueError("polygon must be a list of at least 3 [x, y] points")
     poly = np.array([_point(p, "polygon point") for p in points], dtype=np.float64)
-    area = _signed_area(poly)
+    area = signed_area(poly)
     if abs(area) < 1e-9:
         raise ValueError("polygon has zero area")
     if area < 0:

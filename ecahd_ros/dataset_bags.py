@@ -184,7 +184,7 @@ def run_from_bags(args: argparse.Namespace) -> int:
     # everything computed: now write, each file by rename
     dataset.save(out)
     if figure is not None:
-        _save_figure(figure, Path(args.png))
+        save_figure(figure, Path(args.png))
     print(f"map {grid.name} ({grid.fingerprint()}), robot {footprint.name}")
     for line in lines:
         print(line)
@@ -234,7 +234,7 @@ def _coverage_figure(grid, result, covered, share: float):
     return fig
 
 
-def _save_figure(fig, path: Path) -> None:
+def save_figure(fig, path: Path) -> None:
     """Write a PNG by rename (no half-written file under ``path``)."""
     from ecahd_core.viz import pyplot
 

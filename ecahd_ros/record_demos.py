@@ -226,7 +226,7 @@ def _figure(grid, zones, routes, planned, astar, habit: str, path: Path) -> None
     an arrow at each goal), written by rename."""
     from ecahd_core.viz import draw_map, pyplot
 
-    from ecahd_ros.dataset_bags import _save_figure
+    from ecahd_ros.dataset_bags import save_figure
 
     plt = pyplot()
     xmin, ymin, xmax, ymax = grid.bounds
@@ -251,4 +251,4 @@ def _figure(grid, zones, routes, planned, astar, habit: str, path: Path) -> None
     ax.set_title(f"{len(routes)} of the recorded routes; right share: of the corridor length "
                  f"(all routes)", fontsize=9)
     fig.tight_layout()
-    _save_figure(fig, path)
+    save_figure(fig, path)
