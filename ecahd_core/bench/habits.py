@@ -54,6 +54,7 @@ MAX_MODELS = 3
 MODEL_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_.-]{0,31}$")
 PLANNERS = ("SD", "ECAHD", "ECAHD + net")  # each model's rows, in order
 ASTAR, OPERATOR = "A*", "operator"  # the reference rows' names
+SUCCESS_RADIUS = 1.0  # [m] a plan succeeds with a point this close to the goal (the paper's)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -187,6 +188,21 @@ def _pairs(grid, operator, zones, settings: HabitsBenchSettings) -> list:
                      f"operator")
 
 
+def _judge(paths, problems, footprint, grid) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per problem, as ``ecahd bench planning`` judges a cell: (collision-free by the exact
+    checker, success: a point within 1 m of the goal, length over the problem's A* length),
+    each (n,)."""
+    from ecahd_core.collision import check_collision
+
+    free, success, ratio = [], [], []
+    for path, prob in zip(paths, problems):
+        free.append(check_collision(path, footprint, grid).collision_free)
+        success.append(bool(np.linalg.norm(path - prob.goal, axis=1).min() <= SUCCESS_RADIUS))
+        ratio.append(float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
+                     / max(prob.astar_length, 1e-9))
+    return np.array(free, dtype=bool), np.array(success, dtype=bool), np.array(ratio)
+
+
 def run_habits_benchmark(settings: HabitsBenchSettings, *, progress: bool = True
                          ) -> HabitsBenchResult:
     """Every model's SD / ECAHD / ECAHD + net rows, A*'s and the operator's, on the same
@@ -196,7 +212,7 @@ def run_habits_benchmark(settings: HabitsBenchSettings, *, progress: bool = True
     from tqdm import tqdm
 
     from ecahd_core.astar import clearance_for_footprint, planner_for
-    from ecahd_core.bench.planning import PlanningBenchSettings, _judge, problem_seed
+    from ecahd_core.bench.planning import PlanningBenchSettings, problem_seed
     from ecahd_core.bench.replan import load_bench_map
     from ecahd_core.cost import CollisionCost, CostConfig
     from ecahd_core.footprint import make_footprint
@@ -287,19 +303,20 @@ def run_habits_benchmark(settings: HabitsBenchSettings, *, progress: bool = True
     keys = [(OPERATOR, OPERATOR), (ASTAR, ASTAR)] + [(n, p) for n in planners for p in PLANNERS]
     for key in keys:
         model, planner = key
-        cell = _judge(paths[key], times[key], [], problems, fp, grid, method=planner,
-                      guidance=planner != "SD", robot=settings.robot)
+        free, success, ratio = _judge(paths[key], problems, fp, grid)
         habit = habit_metrics(paths[key], grid, fp, zones)
+        ms = np.asarray(times[key])
         rows.append(HabitRow(
             model=model, planner=planner, checkpoint=checkpoints.get(model),
             problems=len(problems), right=_percent(habit.right_share),
             corridor_m=round(habit.corridor_length, 2),
             zone=_percent(habit.zone_share) if zones else None,
-            collision_free=cell.collision_free, success=cell.success,
-            success_free=cell.success_free, length_ratio=cell.length_ratio,
-            time_ms_median=cell.time_ms_median, time_ms_p95=cell.time_ms_p95,
+            collision_free=100 * float(free.mean()), success=100 * float(success.mean()),
+            success_free=100 * float((free & success).mean()), length_ratio=float(ratio.mean()),
+            time_ms_median=float(np.median(ms)), time_ms_p95=float(np.percentile(ms, 95)),
             fallback=fallbacks[model] if planner == "ECAHD + net" else None,
-            free_by_problem=cell.free_by_problem, time_ms_by_problem=cell.time_ms_by_problem))
+            free_by_problem=[bool(f) for f in free],
+            time_ms_by_problem=[round(float(t), 2) for t in ms]))
     pairs = [[[round(float(v), 4) for v in p.start], [round(float(v), 4) for v in p.goal]]
              for p in problems]
     return HabitsBenchResult(settings=settings, map_name=grid.name, rows=rows, pairs=pairs,
