@@ -49,7 +49,9 @@ def tiny_segment_dd(tmp_path_factory):
     np.testing.assert_allclose(u[:, 0], 0.0, atol=1e-6)
     np.testing.assert_allclose(u[:, -1], np.tile([1.0, 0.0], (len(u), 1)), atol=1e-5)
     path = tmp_path_factory.mktemp("segdd") / "general_dd.pt"
-    train_segment_dd(path, data, steps=20, progress=False)
+    from ecahd_core.model_zoo import recipe
+
+    train_segment_dd(path, data, recipe("dd"), steps=20, progress=False)
     return path
 
 

@@ -175,6 +175,7 @@ def add_dd_arguments(p: argparse.ArgumentParser) -> None:
 
 def run_dd(args: argparse.Namespace) -> int:
     from ecahd_core.general.segment_dd import build_segment_data, train_segment_dd
+    from ecahd_core.model_zoo import recipe
 
     set_torch_threads(args.threads)
     for name in ("maps", "pairs", "steps", "minutes"):
@@ -186,7 +187,7 @@ def run_dd(args: argparse.Namespace) -> int:
     print(f"segment data: {len(data.segments)} segments (mirrored) of {data.maps} maps, "
           f"{data.dropped} too short dropped, in {data.seconds:.0f} s", flush=True)
     t0 = time.perf_counter()
-    result = train_segment_dd(args.out, data, seed=args.seed, steps=args.steps,
+    result = train_segment_dd(args.out, data, recipe("dd"), seed=args.seed, steps=args.steps,
                               minutes=args.minutes, progress=not args.no_progress)
     last = result.loss_history[-1][1] if result.loss_history else float("nan")
     print(f"trained the segment-frame DD: {result.checkpoint.step} steps in "

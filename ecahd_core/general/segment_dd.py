@@ -196,16 +196,15 @@ def build_segment_data(maps: int, *, seed: int = 0, pairs_per_map: int = 100,
                        dropped=dropped, seconds=time.perf_counter() - t0)
 
 
-def train_segment_dd(out: str | Path, data: SegmentData, *, seed: int = 0,
+def train_segment_dd(out: str | Path, data: SegmentData, recipe, *, seed: int = 0,
                      steps: int | None = None, minutes: float | None = None,
                      robot: str = "circle", progress: bool = True):
-    """Train the segment-frame DD on ``data`` with the per-map DD's recipe
-    (``model_zoo.RECIPES["dd"]``) and write its checkpoint to ``out`` (inference-only)."""
+    """Train the segment-frame DD on ``data`` with ``recipe`` (the per-map DD's,
+    ``model_zoo.recipe("dd")``) and write its checkpoint to ``out`` (inference-only)."""
     from ecahd_core.diffusion import TrainConfig, train
     from ecahd_core.footprint import make_footprint
-    from ecahd_core.model_zoo import recipe
 
-    r = recipe("dd")
+    r = recipe
     P = int(data.segments.shape[1])
     tc = TrainConfig(steps=steps or r.steps, batch_size=r.batch_for(P),
                      warmup_steps=r.warmup_steps, lr=r.lr, ema_decay=r.ema_decay, seed=seed,
