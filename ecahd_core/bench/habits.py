@@ -162,8 +162,9 @@ def _percent(x: float) -> float | None:
 
 def _pairs(grid, operator, zones, settings: HabitsBenchSettings) -> list:
     """The first ``settings.problems`` problems of ``make_problems`` (seeded; a longer list
-    extends a shorter one) whose ends lie outside every zone and which the operator plans,
-    with the operator's Route of each. EcahdError when the map has too few."""
+    extends a shorter one) whose ends lie outside every zone and which the operator plans:
+    [(Problem, the operator's Route, its planning time [ms])]. EcahdError when the map has too
+    few."""
     from ecahd_core.problems import make_problems
 
     n = settings.problems
@@ -176,11 +177,12 @@ def _pairs(grid, operator, zones, settings: HabitsBenchSettings) -> list:
         ends = np.stack([prob.start, prob.goal])
         if any(z.contains(ends).any() for z in zones):
             continue
+        t0 = time.perf_counter()
         try:
             route = operator.plan(prob.start, prob.goal)
         except PlanningError:
             continue
-        kept.append((prob, route))
+        kept.append((prob, route, (time.perf_counter() - t0) * 1e3))
         if len(kept) == n:
             return kept
     raise EcahdError(f"map {grid.name!r}: only {len(kept)} of {n} start/goal pairs (of "
@@ -261,7 +263,7 @@ def run_habits_benchmark(settings: HabitsBenchSettings, *, progress: bool = True
         planners[name] = (sd, hd, net)
     operator = Operator(grid, fp, zones, OperatorConfig(keep_right=settings.habit == "keep-right"))
     chosen = _pairs(grid, operator, zones, settings)
-    problems = [p for p, _ in chosen]
+    problems = [p for p, _, _ in chosen]
 
     paths, times, fallbacks = {}, {}, {}
 
@@ -269,13 +271,11 @@ def run_habits_benchmark(settings: HabitsBenchSettings, *, progress: bool = True
         paths.setdefault(key, []).append(np.asarray(path, dtype=np.float64).reshape(-1, 2))
         times.setdefault(key, []).append(ms)
 
-    for prob, route in chosen:  # the references: A* timed here, the operator's route as planned
+    for prob, route, route_ms in chosen:  # the references: the operator's route, A* timed here
+        record((OPERATOR, OPERATOR), route.path, route_ms)
         t0 = time.perf_counter()
         path = astar.plan(prob.start, prob.goal)
         record((ASTAR, ASTAR), path, (time.perf_counter() - t0) * 1e3)
-        t0 = time.perf_counter()
-        path = operator.plan(prob.start, prob.goal).path
-        record((OPERATOR, OPERATOR), path, (time.perf_counter() - t0) * 1e3)
     for name, (sd, hd, net) in planners.items():
         gen, net_gen = torch.Generator(), torch.Generator()
         rules = []
@@ -296,7 +296,8 @@ def run_habits_benchmark(settings: HabitsBenchSettings, *, progress: bool = True
             record((name, "ECAHD + net"), safe.path, ms + safe.time_ms)
             rules.append(safe.rule)
         fallbacks[name] = 100.0 * float(np.mean([r == "fallback" for r in rules]))
-        log.info("%s: %d pairs planned", name, len(problems))
+        log.info("%s: %d pairs planned in %.0f s", name, len(problems),
+                 sum(times[(name, "SD")] + times[(name, "ECAHD + net")]) / 1e3)
 
     rows = []
     checkpoints = dict(models)
