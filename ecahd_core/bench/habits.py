@@ -358,7 +358,7 @@ def format_table(result: HabitsBenchResult) -> str:
 def plot_habits(result: HabitsBenchResult, path) -> Path:
     """The first ``figure_problems`` pairs on the map: one panel with A* (dashed) and the
     operator (solid), then one per model with ECAHD + net (solid) and SD's waypoints (dotted);
-    one colour per pair. Written by rename (no half-written file)."""
+    one colour per pair, two panels a row. Written by rename (no half-written file)."""
     from ecahd_core.scenario import read_zones
     from ecahd_core.viz import draw_map, pyplot
 
@@ -369,8 +369,14 @@ def plot_habits(result: HabitsBenchResult, path) -> Path:
     plt = pyplot()
     xmin, ymin, xmax, ymax = grid.bounds
     aspect = (ymax - ymin) / max(xmax - xmin, 1e-9)
-    cols = 1 + len(names)
-    fig, axes = plt.subplots(1, cols, figsize=(5.5 * cols, 5.5 * aspect + 0.9), squeeze=False)
+    panels = 1 + len(names)
+    cols = 2 if panels > 2 else panels  # two panels a row: a building map stays readable
+    rows = -(-panels // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(7.0 * cols, (7.0 * aspect + 0.5) * rows + 0.4),
+                             squeeze=False)
+    axes = axes.ravel()
+    for ax in axes[panels:]:
+        ax.axis("off")
     colours = plt.get_cmap("tab10").colors
 
     def panel(ax, title, solid, dotted=None, dashed=None):
@@ -392,10 +398,10 @@ def plot_habits(result: HabitsBenchResult, path) -> Path:
         ax.set_title(title, fontsize=9)
 
     op, a = result.row(OPERATOR, OPERATOR), result.row(ASTAR, ASTAR)
-    panel(axes[0, 0], f"operator, solid ({_cell(op.right, 0)}% right); A*, dashed "
+    panel(axes[0], f"operator, solid ({_cell(op.right, 0)}% right); A*, dashed "
                       f"({_cell(a.right, 0)}% right)",
           result.paths[(OPERATOR, OPERATOR)], dashed=result.paths[(ASTAR, ASTAR)])
-    for ax, name in zip(axes[0, 1:], names):
+    for ax, name in zip(axes[1:], names):
         net, sd = result.row(name, "ECAHD + net"), result.row(name, "SD")
         panel(ax, f"{name}: ECAHD + net, solid ({_cell(net.right, 0)}% right, "
                   f"{net.collision_free:.0f}% free); SD, dotted ({_cell(sd.right, 0)}% right)",
