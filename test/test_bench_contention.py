@@ -131,8 +131,9 @@ def test_settings_validation_and_thread_counts():
 
 
 def test_every_benchmark_takes_threads_and_run_applies_it():
+    required = {"habits": ["--map", "m.yaml", "--models", "a=a.pt"]}  # no default models
     for name in bench.BENCHMARKS:
-        assert parse([name]).threads == 1  # inference default
+        assert parse([name] + required.get(name, [])).threads == 1  # inference default
     assert parse(["sampling", "--threads", "2"]).threads == 2
     seen = []
     table = {"probe": bench.Benchmark(help="", add_arguments=lambda p: None,
