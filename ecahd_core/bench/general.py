@@ -66,9 +66,13 @@ class GeneralBenchResult:
 
 
 def family_of(spec: str) -> str:
-    """A map spec's family: the generated kind, else the map's name."""
+    """A map spec's family: the generated kind, else the map's name (a YAML file's stem)."""
+    from pathlib import Path
+
     head = spec.split(":")[0]
-    return head if head in ("warehouse", "office", "depot") else spec
+    if head in ("warehouse", "office", "depot"):
+        return head
+    return Path(spec).stem if spec.endswith((".yaml", ".yml")) else spec
 
 
 def run_general_benchmark(settings: GeneralBenchSettings, *, progress: bool = True
