@@ -100,3 +100,25 @@ def test_shipped_models_are_what_the_recipes_build(kind, architecture):
     assert (ckpt.step, ckpt.train_config["batch_size"]) == (r.steps, r.batch_size)
     assert (ckpt.train_config["lr"], ckpt.train_config["ema_decay"]) == (r.lr, r.ema_decay)
     assert sample_steps(ckpt) == r.sample_steps
+
+
+def test_every_shipped_model_together_under_30_mb_and_the_generalists_plan_anywhere():
+    """Issue 40: all shipped models <= 30 MB; the generalists ship and serve a map that has no
+    model of its own (maze2d-umaze): a plan from start to goal, ECAHD's dense path through
+    SD + the segment-frame DD."""
+    from ecahd_core.general.checkpoint import GeneralCheckpoint
+    from ecahd_core.model_zoo import general_path, load_dd, load_sd
+    from ecahd_core.planning.hierarchical import HierarchicalPlanner
+    from ecahd_core.planning.sparse import SparseDiffusion
+
+    assert sum(p.stat().st_size for p in MODELS_DIR.glob("*.pt")) <= 30e6
+    assert general_path("sd").parent == MODELS_DIR and general_path("dd").parent == MODELS_DIR
+    umaze = builtin_map("maze2d-umaze")
+    assert isinstance(load_sd(umaze), GeneralCheckpoint)
+    assert load_dd(umaze).meta["frame"] == "segment"
+    robot = make_footprint("circle")
+    sd = SparseDiffusion.for_map(umaze, robot)
+    hd = HierarchicalPlanner.for_map(umaze, robot, sd)
+    start, goal = np.array([1.5, 1.5]), np.array([1.5, 3.5])
+    plan = hd.plan(start, goal, generator=torch.Generator().manual_seed(0))
+    assert np.allclose(plan.trajectory[0], start) and np.allclose(plan.trajectory[-1], goal)
