@@ -242,6 +242,12 @@ def parse_obstacles(data) -> tuple[list[Obstacle], list[str]]:
 def read_scenario(path: str | os.PathLike) -> tuple[list[Obstacle], list[str]]:
     """Read a scenario YAML -> (good obstacles, one error line per bad entry). Raises
     ScenarioError for a missing or unreadable file or a document that is not a scenario."""
+    return _read_with(path, parse_obstacles)
+
+
+def _read_with(path: str | os.PathLike, parse):
+    """``parse`` of a scenario YAML's document; ScenarioError naming the file when it cannot
+    be read, is not YAML or ``parse`` refuses it."""
     import yaml
 
     path = Path(path)
@@ -252,7 +258,7 @@ def read_scenario(path: str | os.PathLike) -> tuple[list[Obstacle], list[str]]:
     except yaml.YAMLError as exc:
         raise ScenarioError(f"scenario {path} is not valid YAML: {exc}") from exc
     try:
-        return parse_obstacles(data)
+        return parse(data)
     except ScenarioError as exc:
         raise ScenarioError(f"scenario {path}: {exc}") from exc
 
@@ -330,19 +336,7 @@ def _parse_zone(entry, index: int) -> Zone:
 def read_zones(path: str | os.PathLike) -> list[Zone]:
     """The zones of a scenario YAML (:func:`parse_zones`); ScenarioError for a file that
     cannot be read, is not YAML or has a bad zone."""
-    import yaml
-
-    path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except OSError as exc:
-        raise ScenarioError(f"cannot read scenario {path}: {exc.strerror or exc}") from exc
-    except yaml.YAMLError as exc:
-        raise ScenarioError(f"scenario {path} is not valid YAML: {exc}") from exc
-    try:
-        return parse_zones(data)
-    except ScenarioError as exc:
-        raise ScenarioError(f"scenario {path}: {exc}") from exc
+    return _read_with(path, parse_zones)
 
 
 def write_scenario(path: str | os.PathLike, obstacles, zones=()) -> Path:
