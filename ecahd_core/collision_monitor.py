@@ -22,11 +22,14 @@ Every command (v, w) is checked before it reaches the base:
    again (step 3; stop if it fails).
 5. Else the command passes unchanged ("none").
 
-The static map (beyond Nav2, off by default: ``static_horizon`` 0): given the map's overlap
-depths (``depths``), every command that passes is also simulated over ``static_horizon`` and refused when it would bring the footprint
-into the map (or deeper into it than now): the robot turns on the spot instead if that is
-clear, else stops. The planners keep a clearance margin from walls, but a tracker's arc cuts
-corners; the scan points the monitor sees are only the unmapped ones.
+The static map (beyond Nav2): given the map's overlap depths (``depths``), every command that
+passes is also simulated over ``static_horizon`` (off by default in the config; the
+local_refiner node's static guard calls :meth:`CollisionMonitor.keep_off_map` on every command
+with its own horizon and the robot's real footprint, scans or none) and refused when it would
+bring the footprint into the map (or deeper into it than now): the robot turns on the spot
+instead if that is clear, else stops. The planners keep a clearance margin from walls, but a
+tracker's arc cuts corners, and a local plan that doubles back swings the robot round in a
+narrow corridor; the scan points the monitor sees are only the unmapped ones.
 
 Moving obstacles (beyond Nav2). Given each point's velocity (:mod:`ecahd_core.tracking`), a
 point is predicted at p + v t at step time t, its clearance shrunk by ``prediction_growth`` t
@@ -271,23 +274,43 @@ class CollisionMonitor:
         """
         result = self._filter_points(pose, v, w, points, points_stamp, now, velocities, bounds,
                                      depths)
-        if depths is None or self.config.static_horizon == 0 or \
-                result.action in ("stop", "yield") or \
-                self._static_ok(pose, result.v, result.w, depths):
+        if depths is None or result.action in ("stop", "yield"):
             return result
-        # the command would bring the footprint into (or deeper into) the map: turn on the
-        # spot if that is clear (the tracker's arc straightens as the heading error shrinks)
-        turn = 0.0 if result.w == 0.0 or not self._static_ok(pose, 0.0, result.w, depths) \
+        return self.keep_off_map(pose, result, depths)
+
+    def keep_off_map(self, pose, result: MonitorResult, depths,
+                     horizon: float | None = None) -> MonitorResult:
+        """The static map's check alone (also where no scan points flow): ``result``'s command
+        held over ``horizon`` [s] (default ``static_horizon``; 0: not checked) must not bring
+        the footprint into the map, nor deeper into it than now; else the robot turns on the
+        spot if that is clear (the tracker's arc straightens as the heading error shrinks), or
+        stops. ``depths`` as for :meth:`filter`.
+
+        Args:
+            pose: (3,) x [m], y [m], yaw [rad].
+            result: the command so far (e.g. ``MonitorResult(v, w, "none", inf, "")``).
+
+        Returns:
+            ``result`` unchanged, or a "stop" (v = 0, w = 0 or the turn on the spot).
+        """
+        horizon = self.config.static_horizon if horizon is None else horizon
+        if horizon == 0 or (result.v == 0.0 and result.w == 0.0):
+            return result
+        t = self._t_static if horizon == self.config.static_horizon else \
+            np.arange(math.ceil(horizon / self.config.sim_dt - 1e-9) + 1) * self.config.sim_dt
+        if self._static_ok(pose, result.v, result.w, depths, t):
+            return result
+        turn = 0.0 if result.w == 0.0 or not self._static_ok(pose, 0.0, result.w, depths, t) \
             else result.w
         return MonitorResult(0.0, turn, "stop", result.min_time_to_collision,
                              f"v={result.v:.2f} m/s, w={result.w:.2f} rad/s would touch the "
-                             f"static map within {self.config.static_horizon} s"
+                             f"static map within {horizon:g} s"
                              + (": turning on the spot" if turn else ""))
 
-    def _static_ok(self, pose, v: float, w: float, depths) -> bool:
-        """The motion at (v, w) over static_horizon never goes deeper into the static map
-        than the robot is now, nor into it when it is clear now."""
-        d = np.asarray(depths(self.simulate(pose, v, w, self._t_static)), dtype=np.float64)
+    def _static_ok(self, pose, v: float, w: float, depths, t: np.ndarray) -> bool:
+        """The motion at (v, w) over the times ``t`` (T,) [s] never goes deeper into the
+        static map than the robot is now, nor into it when it is clear now."""
+        d = np.asarray(depths(self.simulate(pose, v, w, t)), dtype=np.float64)
         return bool(np.all(d[1:] <= max(float(d[0]), DEFAULT_TOLERANCE)))
 
     def _filter_points(self, pose, v: float, w: float, points, points_stamp, now: float,

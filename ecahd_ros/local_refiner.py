@@ -168,12 +168,15 @@ class LocalRefiner(ManagedNode):
         self.tf = None  # TfListener: odometry in odom placed in global_frame through /tf
         self.world = None  # ecahd_core.sensing.LocalWorld once a map arrives (use_scan)
         self.refiner = None  # ecahd_core.planning.local.SegmentRefiner once a map arrives
-        self.monitor = None
-        if p.collision_monitor:
-            from ecahd_core.collision_monitor import CollisionMonitor
+        from ecahd_core.collision_monitor import CollisionMonitor
 
-            self.monitor = CollisionMonitor(self.footprint, p.monitor_config())
+        self.monitor = CollisionMonitor(self.footprint, p.monitor_config()) \
+            if p.collision_monitor else None
+        # the static guard: no command into the map's walls (a monitor without scan points)
+        self.guard = CollisionMonitor(self.footprint, p.monitor_config())
+        self._static = None  # StaticClearance of the current map (the guard's depths)
         self.counters = {"monitor_stop": 0, "monitor_slowdown": 0, "monitor_yield": 0,
+                         "guard_stop": 0,
                          "blocked": 0,
                          "rechecks_invalidated": 0, "scans": 0, "scans_unsynced": 0}
         self._cmd_type = TwistStamped if p.enable_stamped_cmd_vel else Twist
@@ -235,10 +238,11 @@ class LocalRefiner(ManagedNode):
         with self._lock:
             self.params = params
             self.runner.config = params.runner_config()
-            if self.monitor is not None:  # its slowdown cap follows max_v / max_w
-                from ecahd_core.collision_monitor import CollisionMonitor
+            from ecahd_core.collision_monitor import CollisionMonitor
 
+            if self.monitor is not None:  # its slowdown cap follows max_v / max_w
                 self.monitor = CollisionMonitor(self.footprint, params.monitor_config())
+            self.guard = CollisionMonitor(self.footprint, params.monitor_config())
         self.get_logger().info("parameters updated")
 
     def _now(self) -> float:
@@ -272,13 +276,16 @@ class LocalRefiner(ManagedNode):
                               polish_steps=p.polish_steps))
         refiner = SegmentRefiner(planner, grid, self.judged,
                                  generator=self.generator, exact=p.exact_check)
-        world = None
+        from ecahd_core.sensing import StaticClearance
+
+        world, static = None, StaticClearance(grid)
         if p.use_scan:
             from ecahd_core.sensing import LocalWorld
 
             world = LocalWorld(grid, cost, p.local_costmap_config(), offset=p.scan_offset,
                                mark_moving=p.mark_moving_obstacles,
                                shuttles=p.monitor_shuttles)
+            static = world.static_clearance
         self._map_time = self._now()
         self._site, self.map_changed = learnt, changed
         if learnt is not grid and changed > p.map_change_warn:
@@ -288,6 +295,7 @@ class LocalRefiner(ManagedNode):
                 "and the exact checker use the new map; consider training again")
         with self._lock, self._world_lock:
             self.grid, self.planner, self.refiner, self.world = grid, planner, refiner, world
+            self._static = static
             self.runner.refine = refiner
             self.runner.can_turn = refiner.can_turn  # turning in place to the goal's heading
             self.runner.reset_costs()  # the current plan's segments are refined on this map
@@ -440,6 +448,9 @@ class LocalRefiner(ManagedNode):
             if action != "none":
                 self.counters[f"monitor_{action}"] += 1
                 self.runner.v = v  # the controller ramps up from what was really commanded
+        static = self._static
+        if static is not None and pose is not None and action not in ("stop", "yield"):
+            v, w = self._keep_off_map(pose, v, w, static)
         self._publish_cmd(v, w)
         ms = (time.perf_counter() - t0) * 1e3
         self._control_ms.add(ms)
@@ -454,6 +465,24 @@ class LocalRefiner(ManagedNode):
                                                 reason=cmd.reason, monitor=action,
                                                 map_ready=self.planner is not None,
                                                 wall=time.time()))
+
+    def _keep_off_map(self, pose, v: float, w: float, static) -> tuple[float, float]:
+        """The static guard (``static_guard_horizon``): (v, w) unless, held, it would bring
+        the real footprint into the map's walls; then the turn on the spot or a stop (counted,
+        a throttled warning naming the command)."""
+        from ecahd_core.collision_monitor import MonitorResult
+
+        guarded = self.guard.keep_off_map(
+            pose, MonitorResult(v, w, "none", math.inf, ""),
+            partial(static.depths, footprint=self.footprint),
+            horizon=self.params.static_guard_horizon)
+        if guarded.action == "none":
+            return v, w
+        self.counters["guard_stop"] += 1
+        self.runner.v = guarded.v
+        self.get_logger().warning(f"static guard at ({pose[0]:.2f}, {pose[1]:.2f}): "
+                                  f"{guarded.reason}", throttle_duration_sec=2.0)
+        return guarded.v, guarded.w
 
     def _on_event(self, kind: str, what, stamp) -> None:
         p = self.params
@@ -535,7 +564,8 @@ class LocalRefiner(ManagedNode):
             "control_ms_p50": self._control_ms.quantile(0.5),
             "control_ms_p99": self._control_ms.quantile(0.99), "dd_calls": self.dd_calls,
             "monitor_stops": c["monitor_stop"], "monitor_slowdowns": c["monitor_slowdown"],
-            "monitor_yields": c["monitor_yield"], "scans": c["scans"],
+            "monitor_yields": c["monitor_yield"], "guard_stops": c["guard_stop"],
+            "scans": c["scans"],
             "stamps_from_another_clock": self._stamps.mismatches,
             "stale_stamps": self._stamps.stale}
         mismatched = self._stamps.mismatches > self._mismatches_seen

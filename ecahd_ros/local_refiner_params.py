@@ -76,6 +76,11 @@ PARAMETERS = [
     ParamSpec("collision_monitor", True, "stop / slow down any cmd_vel whose footprint, swept "
                                          "over monitor_time_to_collision, hits a scan point "
                                          "that is not on the static map"),
+    ParamSpec("static_guard_horizon", 0.5, "[s] every cmd_vel, held this long, must keep the "
+                                           "robot's footprint off the map's walls (nor deeper "
+                                           "into them than now), else the robot turns on the "
+                                           "spot if that is clear, or stops; with or without "
+                                           "scans; 0 = off"),
     ParamSpec("monitor_time_to_collision", _MONITOR.time_to_collision, "[s] horizon of the collision monitor"),
     ParamSpec("monitor_stop_margin", _MONITOR.stop_margin, "[m] footprint growth that stops the robot"),
     ParamSpec("monitor_slowdown_margin", _MONITOR.slowdown_margin, "[m] footprint growth that slows the robot down"),
@@ -128,7 +133,8 @@ class LocalRefinerParams:
                              "transform_tolerance",
                              "clearance_margin",
                              "polish_steps", "prepare_ahead", "obstacle_persistence",
-                             "monitor_prediction_growth", "monitor_beat_horizon")
+                             "monitor_prediction_growth", "monitor_beat_horizon",
+                             "static_guard_horizon")
         require_positive(self, "local_costmap_size", "local_costmap_rate",
                          "monitor_time_to_collision", "monitor_source_timeout",
                          "monitor_yield_horizon")

@@ -448,3 +448,32 @@ def test_an_updated_map_of_the_site_keeps_dd_and_j_sees_its_new_walls(rig):
     while time.monotonic() < deadline:
         r.executor.spin_once(timeout_sec=0.01)
     assert r.node.grid.fingerprint() == updated.fingerprint()
+
+
+@pytest.mark.parametrize("horizon", [0.5, 0.0])
+def test_the_static_guard_never_commands_the_robot_into_a_wall(rig, horizon):
+    """The circle 0.02 m from the corridor's south wall (y = 5), heading south-east to a plan
+    point ahead: pure pursuit's arcs would swing it into the wall. With the static guard
+    (static_guard_horizon 0.5 s, the default) no published command, held 0.5 s, touches the
+    map by the exact checker, and the guard's stops are counted; without it (0) one does."""
+    from ecahd_core.collision import check_collision
+    from ecahd_core.collision_monitor import CollisionMonitor
+    from ecahd_core.footprint import make_footprint
+
+    r = rig(static_guard_horizon=horizon, collision_monitor=False, dd_enabled=False)
+    r.send_map()
+    pose = (2.6, 5.42, -0.7)
+    r.send_odom(*pose)
+    r.send_plan([pose[:2], (4.2, 5.42)])
+    cmds = r.next_cmds(30)
+    robot, grid = make_footprint("circle"), builtin_map("maze2d-large")
+    arcs = CollisionMonitor(robot)
+    t = np.linspace(0.0, 0.5, 11)
+    touching = [c for c in cmds if (c.linear.x, c.angular.z) != (0.0, 0.0) and not
+                check_collision(arcs.simulate(pose, c.linear.x, c.angular.z, t)[:, :2], robot,
+                                grid).collision_free]
+    if horizon:
+        assert touching == [] and r.node.counters["guard_stop"] > 0
+        assert max(c.linear.x for c in cmds) > 0  # it still drives where that is clear
+    else:
+        assert touching and r.node.counters["guard_stop"] == 0

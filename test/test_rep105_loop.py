@@ -22,13 +22,6 @@ pytestmark = pytest.mark.slow  # three nodes driving a robot for seconds of sim 
 
 START, GOAL = (1.5, 5.5, 0.3), (5.5, 5.5)  # the corridor y in [5, 6] is free for x in [1, 7]
 WALL_LIMIT = 60.0  # [s]
-# Known bug (2026-12-06, in that day's closing note): run after another test file in the same
-# process (`pytest test/test_scenario.py test/test_rep105_loop.py`, also at 7f14844) it turns
-# south at (4.72, 5.40) and touches the corridor's wall; alone the file passes. Not strict, so
-# a fix shows as XPASS; the order-independent cause is to be found.
-ORDER_BUG = pytest.mark.xfail(strict=False, reason="wall contact when another test file ran "
-                              "first in the process (closing note of 2026-12-06)")
-pytestmark = [pytestmark, ORDER_BUG]  # every test here drives the same loop and hits it
 
 
 class Loop:
