@@ -36,12 +36,22 @@ class PolishConfig:
         clearance: [m] a path whose swept footprint samples all keep this distance from
             obstacles is done (only meaningful below the cost map's margin).
         tolerance: a path whose collision cost is at most this is done.
+        across: each point moves only across the path (its gradient's component along the
+            chord of its neighbours removed), so polishing centres the path and never
+            shuffles points along it. Free to move along it, J's descent pulled a local
+            plan's interior points back towards its start in a 1 m corridor (J reads the
+            footprint at points and segments alike, so a path that doubles back costs no
+            more): 65% of 150 local plans on exact-free corridor segments of maze2d-large
+            doubled back by more than 0.05 m, and in the closed loop the robot turned round
+            to follow them (docs/rules.md, "polishing across the path"). False: the earlier
+            behaviour.
     """
 
     steps: int = 30
     step_size: float = 0.05
     clearance: float = 0.1
     tolerance: float = 1e-6
+    across: bool = True
 
     def __post_init__(self) -> None:
         if self.steps < 0:
@@ -97,6 +107,21 @@ def polish_paths(paths: torch.Tensor, fixed: torch.Tensor, costmap, footprint_po
             break
         active, grad, xa = active[keep], grad[keep], xa.detach()[keep]
         grad = grad.masked_fill(fixed[active][..., None], 0.0)
+        if cfg.across:
+            grad = _across(grad, xa)
         scale = grad.norm(dim=-1).amax(dim=1).clamp_min(1e-12)  # (B',) largest point gradient
         x[active] = xa - cfg.step_size * grad / scale[:, None, None]
     return best, best_cost
+
+
+def _across(grad: torch.Tensor, paths: torch.Tensor) -> torch.Tensor:
+    """grad (B, P, 2) without its component along each point's chord of ``paths`` (B, P, 2):
+    x[i + 1] - x[i - 1] inside, the first and last segments' directions at the ends; a point
+    whose chord has no length keeps its gradient."""
+    chord = torch.empty_like(paths)
+    chord[:, 1:-1] = paths[:, 2:] - paths[:, :-2]
+    chord[:, 0] = paths[:, 1] - paths[:, 0]
+    chord[:, -1] = paths[:, -1] - paths[:, -2]
+    norm = chord.norm(dim=-1, keepdim=True)
+    t = torch.where(norm > 1e-9, chord / norm.clamp_min(1e-9), torch.zeros_like(chord))
+    return grad - (grad * t).sum(dim=-1, keepdim=True) * t

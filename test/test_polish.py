@@ -57,3 +57,23 @@ def test_polish_config_names_bad_values(kwargs, name):
 def test_polish_rejects_bad_shapes():
     with pytest.raises(EcahdError, match=r"\(B, P, 2\)"):
         polish_paths(torch.zeros(4, 2), torch.zeros(4, dtype=torch.bool), CMAP, FP.points, CC)
+
+
+@pytest.mark.parametrize("across", [True, False])
+def test_polish_moves_points_across_the_path_only(across):
+    """A straight local plan along the corridor y = 5.5 of maze2d-large (x in [2, 6] walled
+    on both sides: 0.1 m to spare for the circle), J above the threshold everywhere. Moving
+    points only across the path, polishing keeps their order along it (a local plan that
+    doubled back swung the closed-loop robot round); free to move along it, J's descent
+    pulls an interior point back (the earlier behaviour, ``across=False``)."""
+    a, b = np.array([3.0, 5.47]), np.array([3.45, 5.49])
+    path = torch.tensor(np.linspace(a, b, 4)[None], dtype=torch.float32)
+    fixed = torch.tensor([True, False, False, True])
+    out, _ = polish_paths(path, fixed, CMAP, FP.points, CC, PolishConfig(across=across))
+    d = (b - a) / np.linalg.norm(b - a)
+    s = (out[0].numpy().astype(np.float64) - a) @ d  # progress along the segment [m]
+    back = float(np.max(np.maximum.accumulate(s) - s))
+    if across:
+        assert back < 0.01 and np.all(np.diff(s) > 0)
+    else:
+        assert back > 0.05

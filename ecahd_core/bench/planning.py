@@ -90,6 +90,7 @@ class PlanningBenchSettings:
     c_th: float = 0.1
     dd_retries: int = 0
     polish_steps: int = 30  # DenseConfig's default; 0 = the paper's Algorithm 1
+    polish_across: bool = True  # DenseConfig's default; False: points move along paths too
     keep_better: bool = True  # DenseConfig's default; False = the paper's Algorithm 1
     exact_rule: bool = True  # ours: HierarchicalPlanner.exact_check (not on Table II's variants)
     replan: str = "every_waypoint"
@@ -270,7 +271,8 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                         c_th=settings.c_th, guidance=guidance,
                         guidance_weight=settings.guidance_weight,
                         guidance_space=settings.guidance_space, retries=settings.dd_retries,
-                        polish_steps=settings.polish_steps, keep_better=settings.keep_better),
+                        polish_steps=settings.polish_steps,
+                        polish_across=settings.polish_across, keep_better=settings.keep_better),
                     replan=settings.replan, replan_spacing=settings.replan_spacing,
                     backtracks=settings.backtracks, subgoals=settings.subgoals,
                     settle=settings.settle, exact=settings.exact_rule and not variant,
@@ -364,6 +366,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                "dd_guidance_weight": guidance_weight_for(settings.guidance_weight, margin),
                "guidance_space": settings.guidance_space, "margin": margin,
                "dd_retries": settings.dd_retries, "polish_steps": settings.polish_steps,
+               "polish_across": settings.polish_across,
                "keep_better": settings.keep_better, "exact_rule": settings.exact_rule,
                "leg_batches": settings.leg_batches, "backtracks": settings.backtracks,
                "subgoals": settings.subgoals,
@@ -416,7 +419,9 @@ def format_markdown(r: PlanningBenchResult) -> str:
                 if c.get("dd_guidance_weight", c["guidance_weight"]) != c["guidance_weight"]
                 else "") + f"), c_th {c['c_th']}, "
              f"cost-map margin {c['margin']} m, DD retries {c['dd_retries']}, "
-             f"polishing steps {c.get('polish_steps', 0)}, "
+             f"polishing steps {c.get('polish_steps', 0)}"
+             + (" (across the path)" if c.get("polish_across") else
+                " (along the path too)" if c.get("polish_steps") else "") + ", "
              f"keep the straight plan when DD is worse: {c.get('keep_better', False)}, "
              f"exact rule: {c.get('exact_rule', False)}, "
              f"SD replanning {c['replan']}"

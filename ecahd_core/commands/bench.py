@@ -200,6 +200,9 @@ def _add_planning_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--polish-steps", type=_int_at_least(0), default=d.polish_steps,
                         help="our safety rule: descend J on local plans still above c_th "
                              "(0: paper)")
+    parser.add_argument("--polish-along", action="store_true",
+                        help="polishing moves points along the path too (the earlier rule; "
+                             "ours moves them only across it: local plans never double back)")
     parser.add_argument("--no-keep-better", action="store_true",
                         help="accept DD's plan even when J says the straight one was cheaper "
                              "(the paper's rule; ours keeps the cheaper)")
@@ -268,7 +271,7 @@ def _run_planning(args: argparse.Namespace) -> int:
         selection=args.selection,
         guidance_weight=args.omega, guidance_space=args.guidance_space, margin=args.margin,
         c_th=args.c_th, dd_retries=args.dd_retries, polish_steps=args.polish_steps,
-        keep_better=not args.no_keep_better, exact_rule=not args.no_exact_rule,
+        polish_across=not args.polish_along, keep_better=not args.no_keep_better, exact_rule=not args.no_exact_rule,
         replan=args.replan, warm_fraction=args.warm_fraction, max_spacing=args.max_spacing,
         place_reach=args.place_reach, ablation=not args.no_ablation, precision=args.precision,
         net_resamples=args.net_resamples, replan_spacing=args.replan_spacing,

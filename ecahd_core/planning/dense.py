@@ -47,6 +47,8 @@ class DenseConfig:
             up to this many steps (ecahd_core.polish; the start and the final goal stay fixed,
             an intermediate waypoint may move). 0 is the paper's behaviour.
         polish_step_size: [m] the largest point move per polishing step.
+        polish_across: polishing moves points only across the path (PolishConfig.across);
+            False: along it too (the earlier behaviour, which let local plans double back).
         keep_better: our third rule, beyond the paper: when DD's plan costs more by J than the
             straight local plan it was asked to improve (DD can overshoot), keep the straight
             plan (polishing then starts from it). False is the paper's behaviour.
@@ -65,6 +67,7 @@ class DenseConfig:
     guidance_space: str = "x0"
     polish_steps: int = 30
     polish_step_size: float = 0.05
+    polish_across: bool = True
     keep_better: bool = True
 
     def __post_init__(self) -> None:
@@ -75,7 +78,8 @@ class DenseConfig:
     def polish_config(self):
         from ecahd_core.polish import PolishConfig
 
-        return PolishConfig(steps=self.polish_steps, step_size=self.polish_step_size)
+        return PolishConfig(steps=self.polish_steps, step_size=self.polish_step_size,
+                            across=self.polish_across)
 
 
 @dataclass(frozen=True)
