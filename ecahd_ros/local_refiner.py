@@ -85,6 +85,7 @@ from rclpy.clock import Clock, ClockType
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
+from ecahd_core.collision_monitor import CollisionMonitor, MonitorResult
 from ecahd_core.errors import EcahdError
 from ecahd_core.frames import FrameError
 from ecahd_core.model_zoo import learnt_map
@@ -168,8 +169,6 @@ class LocalRefiner(ManagedNode):
         self.tf = None  # TfListener: odometry in odom placed in global_frame through /tf
         self.world = None  # ecahd_core.sensing.LocalWorld once a map arrives (use_scan)
         self.refiner = None  # ecahd_core.planning.local.SegmentRefiner once a map arrives
-        from ecahd_core.collision_monitor import CollisionMonitor
-
         self.monitor = CollisionMonitor(self.footprint, p.monitor_config()) \
             if p.collision_monitor else None
         # the static guard: no command into the map's walls (a monitor without scan points)
@@ -238,8 +237,6 @@ class LocalRefiner(ManagedNode):
         with self._lock:
             self.params = params
             self.runner.config = params.runner_config()
-            from ecahd_core.collision_monitor import CollisionMonitor
-
             if self.monitor is not None:  # its slowdown cap follows max_v / max_w
                 self.monitor = CollisionMonitor(self.footprint, params.monitor_config())
             self.guard = CollisionMonitor(self.footprint, params.monitor_config())
@@ -470,8 +467,6 @@ class LocalRefiner(ManagedNode):
         """The static guard (``static_guard_horizon``): (v, w) unless, held, it would bring
         the real footprint into the map's walls; then the turn on the spot or a stop (counted,
         a throttled warning naming the command)."""
-        from ecahd_core.collision_monitor import MonitorResult
-
         guarded = self.guard.keep_off_map(
             pose, MonitorResult(v, w, "none", math.inf, ""),
             partial(static.depths, footprint=self.footprint),
