@@ -54,7 +54,6 @@ MAX_MODELS = 3
 MODEL_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_.-]{0,31}$")
 PLANNERS = ("SD", "ECAHD", "ECAHD + net")  # each model's rows, in order
 ASTAR, OPERATOR = "A*", "operator"  # the reference rows' names
-SUCCESS_RADIUS = 1.0  # [m] a plan succeeds with a point this close to the goal (the paper's)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -190,21 +189,6 @@ def _pairs(grid, operator, zones, settings: HabitsBenchSettings) -> list:
                      f"operator")
 
 
-def _judge(paths, problems, footprint, grid) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per problem, as ``ecahd bench planning`` judges a cell: (collision-free by the exact
-    checker, success: a point within 1 m of the goal, length over the problem's A* length),
-    each (n,)."""
-    from ecahd_core.collision import check_collision
-
-    free, success, ratio = [], [], []
-    for path, prob in zip(paths, problems):
-        free.append(check_collision(path, footprint, grid).collision_free)
-        success.append(bool(np.linalg.norm(path - prob.goal, axis=1).min() <= SUCCESS_RADIUS))
-        ratio.append(float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
-                     / max(prob.astar_length, 1e-9))
-    return np.array(free, dtype=bool), np.array(success, dtype=bool), np.array(ratio)
-
-
 def run_habits_benchmark(settings: HabitsBenchSettings, *, progress: bool = True
                          ) -> HabitsBenchResult:
     """Every model's SD / ECAHD / ECAHD + net rows, A*'s and the operator's, on the same
@@ -214,7 +198,7 @@ def run_habits_benchmark(settings: HabitsBenchSettings, *, progress: bool = True
     from tqdm import tqdm
 
     from ecahd_core.astar import clearance_for_footprint, planner_for
-    from ecahd_core.bench.planning import PlanningBenchSettings, problem_seed
+    from ecahd_core.bench.planning import PlanningBenchSettings, judge_paths, problem_seed
     from ecahd_core.bench.replan import load_bench_map
     from ecahd_core.cost import CollisionCost, CostConfig
     from ecahd_core.footprint import make_footprint
@@ -304,7 +288,8 @@ def run_habits_benchmark(settings: HabitsBenchSettings, *, progress: bool = True
     keys = [(OPERATOR, OPERATOR), (ASTAR, ASTAR)] + [(n, p) for n in planners for p in PLANNERS]
     for key in keys:
         model, planner = key
-        free, success, ratio = _judge(paths[key], problems, fp, grid)
+        judged = judge_paths(paths[key], problems, fp, grid)
+        free, success, ratio = judged.free, judged.success, judged.ratio
         habit = habit_metrics(paths[key], grid, fp, zones)
         ms = np.asarray(times[key])
         rows.append(HabitRow(

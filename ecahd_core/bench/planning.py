@@ -170,21 +170,49 @@ class PlanningBenchResult:
     context: dict = field(default_factory=dict)
 
 
-def _judge(paths, times, dd, problems, footprint, grid, *, method, guidance, robot, variant=""):
+SUCCESS_RADIUS = 1.0  # [m] a plan succeeds with a point this close to the goal (the paper's)
+FINAL_RADIUS = 0.5  # [m] ... and ends this close to it (success_final)
+
+
+@dataclass(frozen=True)
+class PathJudgement:
+    """How plans did on their problems, each (n,): ``success`` (a point within SUCCESS_RADIUS
+    of the goal), ``final`` (the last point within FINAL_RADIUS), ``free`` (collision-free by
+    the exact checker), ``penetration`` (its share of poses in contact), ``ratio`` (length
+    over the problem's A* length)."""
+
+    success: np.ndarray
+    final: np.ndarray
+    free: np.ndarray
+    penetration: np.ndarray
+    ratio: np.ndarray
+
+
+def judge_paths(paths, problems, footprint, grid) -> PathJudgement:
+    """Judge plans [(N_i, 2) [m]] on their problems (each with ``goal`` (2,) and
+    ``astar_length`` [m]) for ``footprint`` on ``grid``, as every planning benchmark does."""
     from ecahd_core.collision import check_collision
 
-    succ, fin, free, pen, ratio, ok_free = [], [], [], [], [], []
+    succ, fin, free, pen, ratio = [], [], [], [], []
     for path, prob in zip(paths, problems):
+        path = np.asarray(path, dtype=np.float64).reshape(-1, 2)
         d = np.linalg.norm(path - prob.goal, axis=1)
         rep = check_collision(path, footprint, grid)
-        s = bool(d.min() <= 1.0)
-        succ.append(s)
-        fin.append(bool(d[-1] <= 0.5))
+        succ.append(bool(d.min() <= SUCCESS_RADIUS))
+        fin.append(bool(d[-1] <= FINAL_RADIUS))
         free.append(rep.collision_free)
-        ok_free.append(s and rep.collision_free)
         pen.append(rep.penetration_fraction)
         ratio.append(float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
                      / max(prob.astar_length, 1e-9))
+    return PathJudgement(success=np.array(succ, dtype=bool), final=np.array(fin, dtype=bool),
+                         free=np.array(free, dtype=bool), penetration=np.array(pen),
+                         ratio=np.array(ratio))
+
+
+def _judge(paths, times, dd, problems, footprint, grid, *, method, guidance, robot, variant=""):
+    j = judge_paths(paths, problems, footprint, grid)
+    succ, fin, free, pen, ratio, ok_free = (j.success, j.final, j.free, j.penetration, j.ratio,
+                                            j.success & j.free)
     return CellResult(method=method, guidance=guidance, robot=robot, variant=variant,
                       success=100 * float(np.mean(succ)), success_final=100 * float(np.mean(fin)),
                       success_free=100 * float(np.mean(ok_free)),
