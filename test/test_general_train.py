@@ -180,3 +180,64 @@ def test_fine_tuning_on_one_map_starts_from_a_generalist(tiny_data, tmp_path, ca
     # shipped as the map's own SD: load_sd finds the generalist
     monkeypatch.setenv("ECAHD_MODELS", str(tmp_path))
     assert load_sd(builtin_map("maze2d-umaze")).step == 3
+
+
+def test_without_mirrors_the_augmentation_keeps_a_side():
+    """ROTATIONS (``--no-mirror``) keep which side a path passes a point on: the sign of the
+    cross product of its direction and the point; the other four symmetries flip it. A
+    keep-right demonstration stays keep-right only under the rotations."""
+    from ecahd_core.general.train import ROTATIONS
+
+    path = torch.tensor([[-0.5, 0.0], [0.5, 0.0]])  # heading +x
+    wall = torch.tensor([0.0, 0.3])  # on its left
+    for code in range(8):
+        a, b = symmetric_points(path, code)
+        w = symmetric_points(wall[None], code)[0]
+        d, r = b - a, w - a
+        left = float(d[0] * r[1] - d[1] * r[0]) > 0
+        assert left == (code in ROTATIONS), code
+    # the draw: with mirror False every code drawn is a rotation
+    cfg = GeneralTrainConfig(maps_per_batch=2, problems_per_map=4, mirror=False)
+    assert GeneralTrainConfig.from_dict(cfg.to_dict()) == cfg
+
+
+def test_fine_tuning_on_demonstrations_of_the_map(tiny_data, tmp_path, capsys):
+    """``ecahd train-general --map M --expert NPZ --no-mirror``: the dataset's paths (here the
+    A* expert's of ``ecahd dataset``, as demonstrations would be) become the shard, its source
+    recorded; a dataset of another map is one line naming both, exit code 2."""
+    import numpy as np
+
+    from ecahd_core.dataset import generate_dataset
+    from ecahd_core.general.data import iter_shards
+    from ecahd_core.maps import builtin_map
+
+    grid = builtin_map("maze2d-umaze")
+    demos = generate_dataset(grid, pairs=5, seed=3, progress=False)
+    demos.save(tmp_path / "demos.npz")
+    base = train_general(GroupedData(tiny_data), TINY_RECIPE, out_path=tmp_path / "base.pt",
+                         steps=1, model_config=tiny_config(), checkpoint_minutes=None,
+                         progress=False).checkpoint
+    base.save(tmp_path / "base_ship.pt", include_training_state=False)
+    data = tmp_path / "ft-data"
+    args = ["train-general", "--map", "maze2d-umaze", "--expert", str(tmp_path / "demos.npz"),
+            "--data", str(data), "--from", str(tmp_path / "base_ship.pt"),
+            "--out", str(tmp_path / "ft.pt"), "--maps-per-batch", "1", "--problems-per-map", "4",
+            "--lr", "1e-3", "--warmup", "0", "--no-mirror", "--no-progress", "--steps", "2"]
+    assert main(args) == 0
+    shard = next(iter_shards(data))
+    assert shard.maps[0]["source"] == demos.sha256 and shard.maps[0]["pairs"] == 5
+    a = shard.arrays
+    whole = a["horizon"] == 10  # the whole problems, then one shorter horizon each
+    assert whole.sum() == 5 and len(whole) == 10
+    # ... are the dataset's own sparse paths, stored in their views' coordinates
+    metres = a["centre"][whole, None] + a["half_side"][whole, None, None] * a["waypoints"][whole]
+    assert np.allclose(metres, demos.sparse, atol=1e-4)
+    ckpt = load_general_checkpoint(tmp_path / "ft.pt")
+    assert ckpt.train_config["mirror"] is False
+    capsys.readouterr()
+    other = ["train-general", "--map", "maze2d-medium", "--expert", str(tmp_path / "demos.npz"),
+             "--data", str(tmp_path / "other"), "--from", str(tmp_path / "base_ship.pt"),
+             "--out", str(tmp_path / "o.pt"), "--steps", "1", "--no-progress"]
+    assert main(other) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "maze2d-umaze" in err[0] and "maze2d-medium" in err[0]

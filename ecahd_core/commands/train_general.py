@@ -6,6 +6,8 @@ buildings (``ecahd_core.general``).
     ecahd train-general --data runs/general/data --steps 200 --out /tmp/g.pt
     ecahd train-general --map my.yaml --from general --minutes 3 --out my.pt --ship my_sd.pt
                                                            # fine-tune on one map
+    ecahd train-general --map my.yaml --expert mixed.npz --no-mirror --from general ...
+                                                           # ... on the robot's own driving
     ecahd train-general-dd --maps 60 --out general_dd.pt     # the segment-frame DD
 
 ``--maps N`` builds (or finishes building: resumable) the dataset of N maps in ``--data`` first;
@@ -45,6 +47,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "with --from")
     p.add_argument("--pairs", type=int, default=400,
                    help="with --map: expert paths on the map (two samples each)")
+    p.add_argument("--expert", default=None, metavar="NPZ",
+                   help="with --map: learn this dataset of the map instead of A* expert "
+                        "paths (`ecahd dataset`'s file: demonstrations from the robot's bags, "
+                        "--from-bags, or their --mix with the A* expert)")
     p.add_argument("--from", dest="init_from", default=None, metavar="CKPT",
                    help="start from this generalist's weights ('general': the shipped one)")
     p.add_argument("--out", default=str(DEFAULT_DIR / "general.pt"),
@@ -68,6 +74,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="LR warm-up steps (default 1000)")
     p.add_argument("--no-augment", action="store_true",
                    help="no rotations and flips of views and waypoints")
+    p.add_argument("--no-mirror", action="store_true",
+                   help="rotations only, no flips: for demonstrations that keep to one side "
+                        "(a mirrored keep-right path keeps left)")
     p.add_argument("--seed", type=int, default=0, help="seed of weights and every draw")
     p.add_argument("--device", default="cpu", help="cpu, cuda, cuda:1, ...")
     p.add_argument("--threads", type=int, default=1,
@@ -89,7 +98,8 @@ def run(args: argparse.Namespace) -> int:
     given = {"maps_per_batch": args.maps_per_batch, "problems_per_map": args.problems_per_map,
              "lr": args.lr, "warmup_steps": args.warmup}
     try:
-        cfg = GeneralTrainConfig(augment=not args.no_augment, seed=args.seed,
+        cfg = GeneralTrainConfig(augment=not args.no_augment, mirror=not args.no_mirror,
+                                 seed=args.seed,
                                  **{k: v for k, v in given.items() if v is not None})
     except ValueError as exc:
         raise DatasetError(str(exc)) from exc
@@ -106,16 +116,26 @@ def run(args: argparse.Namespace) -> int:
     if args.map is not None and args.maps is not None:
         raise DatasetError("--map (one given map) and --maps (generated maps) exclude each "
                            "other")
+    if args.expert is not None and args.map is None:
+        raise DatasetError("--expert is a dataset of one map: give the map with --map")
     data_dir = Path(args.data) if args.data else DEFAULT_DIR / "data"
     if args.map is not None:
         from ecahd_core.general.data import build_for_map
         from ecahd_core.maps import load_map
 
         grid = load_map(args.map)
-        data_dir = Path(args.data) if args.data else DEFAULT_DIR / f"finetune-{grid.name}"
-        report = build_for_map(data_dir, grid, pairs=args.pairs, seed=args.data_seed)
-        print(f"dataset {data_dir} of map {grid.name!r}: {report.samples} samples in "
-              f"{report.seconds:.0f} s" if report.shards_written else
+        expert = None
+        if args.expert is not None:
+            from ecahd_core.dataset import ExpertDataset
+
+            expert = ExpertDataset.load(args.expert)
+        name = grid.name if expert is None else f"{grid.name}-{Path(args.expert).stem}"
+        data_dir = Path(args.data) if args.data else DEFAULT_DIR / f"finetune-{name}"
+        report = build_for_map(data_dir, grid, pairs=args.pairs, seed=args.data_seed,
+                               expert=expert)
+        what = "A* expert" if expert is None else repr(args.expert)
+        print(f"dataset {data_dir} of map {grid.name!r} from {what}: {report.samples} samples "
+              f"in {report.seconds:.0f} s" if report.shards_written else
               f"dataset {data_dir} of map {grid.name!r}: already there", flush=True)
     if args.maps is not None:
         t0 = time.perf_counter()

@@ -212,28 +212,49 @@ def build(directory: str | os.PathLike, config: GeneralDataConfig | None = None,
                        samples=samples, seconds=time.perf_counter() - t0)
 
 
-def build_for_map(directory: str | os.PathLike, grid, *, pairs: int = 400, seed: int = 0
-                  ) -> BuildReport:
+def build_for_map(directory: str | os.PathLike, grid, *, pairs: int = 400, seed: int = 0,
+                  expert=None) -> BuildReport:
     """The generalist data of one given map (``grid``, e.g. a user's building: fine-tuning,
     ``ecahd train-general --map``): ``pairs`` expert paths, one shard, written atomically;
-    an existing shard of the same map and settings is kept."""
+    an existing shard of the same map, settings and source is kept.
+
+    ``expert``: an :class:`~ecahd_core.dataset.ExpertDataset` of this map to learn instead of
+    the A* expert's paths (``ecahd dataset``'s file: demonstrations cut from the robot's bags,
+    ``--from-bags``, or their ``--mix`` with the A* expert); ``pairs`` is then its size.
+
+    Raises:
+        DatasetError: ``expert`` is of another map (fingerprint) or has another P^g; the
+            directory holds data of another map, settings or source."""
+    if expert is not None:
+        if expert.map_fingerprint != grid.fingerprint():
+            raise DatasetError(f"the dataset is of map {expert.map_name!r} "
+                               f"({expert.map_fingerprint}), not of {grid.name!r} "
+                               f"({grid.fingerprint()})")
+        pairs = expert.num_pairs
     config = GeneralDataConfig(maps=1, maps_per_shard=1, pairs_per_map=pairs, seed=seed)
+    if expert is not None and expert.sparse_horizon != config.sparse_horizon:
+        raise DatasetError(f"the dataset's paths have {expert.sparse_horizon} sparse waypoints; "
+                           f"the generalist learns {config.sparse_horizon}")
+    source = "astar" if expert is None else (expert.sha256 or "given")
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     path = shard_path(directory, 0)
     t0 = time.perf_counter()
     if path.exists():
         shard = next(iter_shards(directory))
+        record = shard.maps[0]
         if shard.config.to_json() == config.to_json() and \
-                shard.maps[0].get("fingerprint") == grid.fingerprint():
+                record.get("fingerprint") == grid.fingerprint() and \
+                record.get("source", "astar") == source:
             return BuildReport(directory=directory, shards_written=0, shards_skipped=1,
                                samples=0, seconds=time.perf_counter() - t0)
-        raise DatasetError(f"{str(directory)!r} holds generalist data of another map or "
-                           f"settings; build in another directory")
-    arrays, record = map_samples(config, 0, grid=grid)
+        raise DatasetError(f"{str(directory)!r} holds generalist data of another map, "
+                           f"settings or source; build in another directory")
+    arrays, record = map_samples(config, 0, grid=grid, expert=expert)
     if not len(arrays["horizon"]):
         raise DatasetError(f"map {grid.name!r}: no expert problem could be made "
                            f"({record.get('error', 'every view too wide')})")
+    record["source"] = source
     _write_shard(path, arrays, [record], config)
     return BuildReport(directory=directory, shards_written=1, shards_skipped=0,
                        samples=len(arrays["horizon"]), seconds=time.perf_counter() - t0)
@@ -243,11 +264,12 @@ def _shard_maps(config: GeneralDataConfig, k: int) -> range:
     return range(k * config.maps_per_shard, min((k + 1) * config.maps_per_shard, config.maps))
 
 
-def map_samples(config: GeneralDataConfig, j: int, grid=None
+def map_samples(config: GeneralDataConfig, j: int, grid=None, expert=None
                 ) -> tuple[dict[str, np.ndarray], dict]:
     """Map j's samples (the shard arrays of the module docstring, N rows) and its record;
     ``grid``: a given map (a user's, for fine-tuning) instead of generated map j, its expert
-    seeded with ``config.seed``."""
+    seeded with ``config.seed``; ``expert``: that map's paths as an ExpertDataset (checked by
+    the caller) instead of the A* expert's."""
     t0 = time.perf_counter()
     if grid is None:
         map_config = config.map_config(j)
@@ -265,17 +287,20 @@ def map_samples(config: GeneralDataConfig, j: int, grid=None
                   "fingerprint": grid.fingerprint()}
     P = config.sparse_horizon
     try:
-        expert = generate_dataset(grid, pairs=config.pairs_per_map, seed=seed,
-                                  footprint_spec=config.robot, min_distance=config.min_distance,
-                                  sparse_horizon=P, waypoints=config.waypoints, progress=False,
-                                  workers=1)
+        expert = expert if expert is not None else generate_dataset(
+            grid, pairs=config.pairs_per_map, seed=seed, footprint_spec=config.robot,
+            min_distance=config.min_distance, sparse_horizon=P, waypoints=config.waypoints,
+            progress=False, workers=1)
     except DatasetError as exc:  # a map without enough expert paths: recorded, not fatal
-        log.warning("map %s: no expert data: %s", map_config.name, exc)
+        log.warning("map %s: no expert data: %s", record["name"], exc)
         record.update(error=str(exc), samples=0, seconds=time.perf_counter() - t0)
         return _empty(config), record
     params = expert.params
-    record.update(waypoints=params.get("waypoints", "arclength"), expert=params["expert"],
-                  attempts=params["attempts"], pairs=expert.num_pairs)
+    record.update(waypoints=params.get("waypoints", "arclength"),
+                  expert=("mix" if "mixed" in params  # ecahd dataset --mix
+                          else params.get("source", params.get("expert", "given"))),
+                  attempts=params.get("attempts"),
+                  pairs=expert.num_pairs)
     N = expert.num_pairs
     rng = np.random.default_rng([config.seed, j, 1])
     h_short = rng.integers(3, P, size=N)  # (N,) in 3..P-1

@@ -61,6 +61,9 @@ from ecahd_core.general.model import (GeneralDenoiserConfig, MapConditionedDenoi
 log = logging.getLogger(__name__)
 
 SYMMETRIES = 8  # the dihedral group of the square: code bit 0 flip x, bit 1 flip y, bit 2 swap
+# its rotations (an even number of the three reflections): left stays left, so a side habit of
+# demonstrations (keep to the right) survives the augmentation; the other four mirror it
+ROTATIONS = (0, 3, 5, 6)
 _STREAM_BATCH = 0  # step_seed stream of the batch's draws
 _STREAM_GLOBAL = 1  # step_seed stream that seeds torch's global RNG at a fresh start
 
@@ -78,6 +81,9 @@ class GeneralTrainConfig:
             updates, as the per-map recipe.
         grad_clip_norm: global gradient-norm clip, or None.
         augment: the 8 symmetries of the square (module docstring).
+        mirror: with ``augment``, the mirror images too; False: the 4 rotations only
+            (:data:`ROTATIONS`), for data whose paths keep to one side (demonstrations of a
+            keep-right habit: a mirrored sample teaches keep-left).
         seed: seed of the initial weights and of every draw.
         log_every: steps between logged (and recorded) mean losses.
         schedule: the forward process.
@@ -92,6 +98,7 @@ class GeneralTrainConfig:
     ema_decay: float = 0.999
     grad_clip_norm: float | None = 1.0
     augment: bool = True
+    mirror: bool = True
     seed: int = 0
     log_every: int = 100
     schedule: ScheduleConfig = field(default_factory=ScheduleConfig)
@@ -282,6 +289,8 @@ class GroupedData:
         index = torch.from_numpy(inverse.reshape(-1).astype(np.int64))  # (B,)
         if cfg.augment:
             codes = torch.randint(SYMMETRIES, (len(rows),), generator=generator)  # (U,)
+            if not cfg.mirror:  # the draw stays the same; each code maps to a rotation
+                codes = torch.tensor(ROTATIONS)[codes % len(ROTATIONS)]
             per_sample = codes[index]  # (B,)
             for code in codes.unique().tolist():
                 if code == 0:
