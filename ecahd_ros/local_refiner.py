@@ -555,6 +555,7 @@ class LocalRefiner(ManagedNode):
             "dd": ("ready" if self.planner is not None and self.planner.dd is not None
                    else "disabled" if not p.dd_enabled else "loading"),
             "plan_points": 0 if waypoints is None else len(waypoints),
+            "waypoints_passed": self.runner.waypoints_passed,
             "control_rate_hz": rate, "control_rate_target_hz": p.control_rate,
             "control_ms_p50": self._control_ms.quantile(0.5),
             "control_ms_p99": self._control_ms.quantile(0.99), "dd_calls": self.dd_calls,

@@ -738,3 +738,31 @@ def test_a_fused_grid_gets_a_distance_bound_that_keeps_the_checker_exact(small_o
             np.testing.assert_array_equal(fast.colliding, slow)
             hits.append(bool(slow.any()))
     assert any(hits) and not all(hits)
+
+
+def test_waypoints_the_robot_passed_while_the_plan_came_are_dropped():
+    """A plan made from where the robot was 0.6 m ago: its first waypoint, now behind the
+    robot, is dropped (counted), so the first segment runs from the robot's pose on to the next
+    one instead of back; a waypoint beside or ahead of the robot, a far one, and the goal stay."""
+    calls = []
+
+    def refine(a, b):
+        calls.append((tuple(np.round(a, 6)), tuple(np.round(b, 6))))
+        return SegmentResult(plan=np.linspace(a, b, 4))
+
+    plan = np.array([[0.0, 0.0], [0.4, 0.3], [2.0, 0.3], [2.0, 2.0]])
+    r = runner(refine, prepare_ahead=0)
+    r.set_pose((0.6, 0.05, 0.0), 0.0)  # past W[1] = (0.4, 0.3) along W[0] -> W[1]
+    r.set_plan(plan, 0.0)
+    assert r.waypoints.tolist() == [[0.0, 0.0], [2.0, 0.3], [2.0, 2.0]]
+    assert r.waypoints_passed == 1 and calls == [((0.6, 0.05), (2.0, 0.3))]
+    # not yet at W[1]: kept
+    r = runner(refine)
+    r.set_pose((0.3, 0.0, 0.0), 0.0)
+    assert r.passed_waypoints(plan) == 0
+    # beyond W[1]'s line but far from it (another part of the map): kept
+    r.set_pose((5.0, -3.0, 0.0), 0.0)
+    assert r.passed_waypoints(plan) == 0
+    # past every interior waypoint: the goal stays
+    r.set_pose((0.6, 0.35, 0.0), 0.0)
+    assert r.passed_waypoints(plan[:3]) == 1 and r.passed_waypoints(plan[:2]) == 0

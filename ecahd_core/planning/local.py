@@ -32,6 +32,7 @@ from ecahd_core.validation import simplify, validate_plan, validate_pose
 WAITING_END_DISTANCE = 0.05  # [m] at the end of the local plan with nothing next: stop
 ALIGN_GAIN = 1.5  # [1/s] turning in place to the goal's heading: w = gain * heading error
 MIN_ALIGN_W = 0.2  # [rad/s] ... but at least this fast (within max_w)
+PASSED_REACH = 1.0  # [m] a plan's waypoint counts as passed by the robot only this near it
 
 
 @dataclass(frozen=True)
@@ -157,6 +158,7 @@ class LocalRunner:
         #   SegmentResult), ("goal_reached", None), ("error", str): drained by the caller
         self.dd_calls = 0
         self.goal_yaw: float | None = None  # [rad] the plan's goal heading (None: any)
+        self.waypoints_passed = 0  # plans' waypoints the robot had passed when they arrived
         # (x, y, yaw) -> the robot may turn in place there (None: always)
         self.can_turn: Callable[[tuple[float, float, float]], bool] | None = None
 
@@ -181,6 +183,10 @@ class LocalRunner:
         xy = simplify(validate_plan(xy, bounds))
         if len(xy) == 1:
             xy = np.concatenate([xy, xy])
+        passed = self.passed_waypoints(xy)
+        if passed:  # planned from where the robot was: do not send it back to them
+            xy = np.concatenate([xy[:1], xy[1 + passed:]])
+            self.waypoints_passed += passed
         for job in self._jobs.values():
             job.cancel()
         self.generation += 1
@@ -189,6 +195,24 @@ class LocalRunner:
         self._starts = {1: np.array(self.pose[:2]) if self.pose is not None else xy[0]}
         self._target = 1  # the next segment to take over (the followed one stays meanwhile)
         self._submit_ahead()
+
+    def passed_waypoints(self, xy: np.ndarray) -> int:
+        """How many of plan xy's (P, 2) [m] first interior waypoints the robot has already
+        passed: a plan made from an earlier pose arrives while the robot drives on (SD's time,
+        a late message). W[k] is passed when the robot, within PASSED_REACH of it, lies beyond
+        it along W[k-1] -> W[k]; the goal never is. 0 without a pose."""
+        if self.pose is None:
+            return 0
+        p = np.array(self.pose[:2])
+        k = 1
+        while k < len(xy) - 1:
+            a, b = xy[k - 1], xy[k]
+            ab = b - a
+            beyond = float((p - a) @ ab) >= float(ab @ ab)  # projection past b
+            if not (beyond and np.linalg.norm(p - b) <= PASSED_REACH):
+                break
+            k += 1
+        return k - 1
 
     def clear_plan(self) -> None:
         for job in self._jobs.values():
