@@ -37,6 +37,9 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
                       "(resumable)"),
     "train-general-dd": ("ecahd_core.commands.train_general:dd",
                          "the generalist DD (in each segment's frame) on generated buildings"),
+    "lanes": ("ecahd_core.commands.lanes",
+              "learn where the robot drives, by direction, from its demonstrations (a lane "
+              "field that plans are moved onto)"),
     "record-demos": ("ecahd_ros.record_demos",
                      "a scripted operator with a habit (keep right, no-go zones) driven in "
                      "simulation, recorded as a bag for dataset --from-bags"),

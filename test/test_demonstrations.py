@@ -337,3 +337,29 @@ def test_demonstrations_mixed_with_expert_data_at_a_share(tmp_path, site, capsys
         .save(tmp_path / "other.npz")
     assert main(["dataset", "--mix", str(demos), str(other), "--out", str(out)]) == 2
     assert "mix data of one map" in capsys.readouterr().err
+
+
+def test_lanes_command_fits_the_demonstrations_of_a_dataset(tmp_path, capsys):
+    """`ecahd lanes`: a field of the dataset's demonstrations on the dataset's map, a figure;
+    A* expert data is refused in one line."""
+    from ecahd_core.lanes import LaneField
+
+    a = drive([(1, 2), (8, 2)])
+    rows = a + still(a[-1], 3.0) + drive([(8, 2), (14, 2), (14, 8)], t0=a[-1][0] + 3.05)[1:]
+    ds = demonstrations_dataset(_cut(rows), _grid(), waypoints="arclength", sources=["b"])
+    data = ds.save(tmp_path / "d.npz")
+    out, png = tmp_path / "lanes.npz", tmp_path / "lanes.png"
+    assert main(["lanes", "--data", str(data), "--out", str(out), "--png", str(png)]) == 0
+    assert "2 demonstrations, 19 m" in capsys.readouterr().out
+    field = LaneField.load(out)
+    field.check_map(_grid())
+    assert field.value(np.array([4.0, 2.0]), 0.0) > 0.5  # driven east along y = 2
+    assert field.value(np.array([4.0, 2.0]), np.pi) < 0.05
+    assert png.stat().st_size > 10_000
+    expert = ExpertDataset.load(data)
+    expert.params.pop("source")
+    expert.save(tmp_path / "a.npz")
+    assert main(["lanes", "--data", str(tmp_path / "a.npz"), "--out", str(tmp_path / "x.npz")]) == 2
+    err = capsys.readouterr().err
+    assert "holds no demonstrations" in err and err.count("\n") == 1
+    assert not (tmp_path / "x.npz").exists()

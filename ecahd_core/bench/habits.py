@@ -13,7 +13,11 @@ checkpoints (``NAME=CKPT``; "general" is the shipped generalist) plans every pai
 - **ECAHD**: ``HierarchicalPlanner`` with J's guidance and our rules, as ``ecahd bench planning``
   builds its ECAHD cell (the same defaults, :class:`~ecahd_core.bench.planning.
   PlanningBenchSettings`), with the map's DD (``--dd-model``);
-- **ECAHD + net**: that same plan through the safety net (``ecahd_core.safety``).
+- **ECAHD + net**: that same plan through the safety net (``ecahd_core.safety``);
+- **ECAHD + net + lanes** (``--lanes FIELD``, ``ecahd lanes``): that plan moved sideways onto
+  the lane field learnt from the demonstrations (``ecahd_core.lanes.shape_path``: never into
+  collision; a shaped plan the exact checker rejects is kept as it came). With ``--lanes`` A*'s
+  paths are shaped too (row "A* + lanes").
 
 Beside them, on the same pairs: **A*** with the footprint's clearance (the expert; about 50% on
 the right half) and the **operator** of ``ecahd record-demos`` (``ecahd_core.operator``: its
@@ -53,7 +57,9 @@ log = logging.getLogger(__name__)
 MAX_MODELS = 3
 MODEL_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_.-]{0,31}$")
 PLANNERS = ("SD", "ECAHD", "ECAHD + net")  # each model's rows, in order
+LANES = "ECAHD + net + lanes"  # with --lanes: each model's fourth row
 ASTAR, OPERATOR = "A*", "operator"  # the reference rows' names
+ASTAR_LANES = "A* + lanes"  # with --lanes: A*'s paths moved onto the lanes
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -72,6 +78,7 @@ class HabitsBenchSettings:
         zones: scenario YAML with a ``zones:`` list, or None.
         dd_model: DD's checkpoint (None: the map's own, else the shipped generalist).
         figure_problems: pairs drawn by ``--png``.
+        lanes: a lane field (``ecahd lanes``) of the map, or None: adds the "+ lanes" rows.
     """
 
     map: str
@@ -84,6 +91,7 @@ class HabitsBenchSettings:
     zones: str | None = None
     dd_model: str | None = None
     figure_problems: int = 3
+    lanes: str | None = None
 
 
 @dataclass
@@ -108,6 +116,8 @@ class HabitRow:
     time_ms_median: float
     time_ms_p95: float
     fallback: float | None = None  # ECAHD + net: % of plans with A* stretches spliced in
+    shaped: float | None = None  # + lanes: % of plans moved onto the lanes
+    shape_dropped: float | None = None  # + lanes: % whose shaped plan collided (kept as came)
     free_by_problem: list = field(default_factory=list)
     time_ms_by_problem: list = field(default_factory=list)
 
@@ -202,6 +212,7 @@ def run_habits_benchmark(settings: HabitsBenchSettings, *, progress: bool = True
     from ecahd_core.bench.replan import load_bench_map
     from ecahd_core.cost import CollisionCost, CostConfig
     from ecahd_core.footprint import make_footprint
+    from ecahd_core.lanes import LaneField, shape_path
     from ecahd_core.operator import Operator, OperatorConfig, habit_metrics
     from ecahd_core.planning.dense import DenseConfig
     from ecahd_core.planning.hierarchical import HierarchicalPlanner
@@ -220,6 +231,10 @@ def run_habits_benchmark(settings: HabitsBenchSettings, *, progress: bool = True
     t_start = time.perf_counter()
     grid = load_bench_map(settings.map)
     fp = make_footprint(settings.robot)
+    field = None
+    if settings.lanes:
+        field = LaneField.load(settings.lanes)
+        field.check_map(grid)
     d = PlanningBenchSettings()  # ECAHD exactly as `ecahd bench planning` runs its ECAHD cell
     cost = CollisionCost.build(grid, fp, CostConfig(margin=CostConfig.for_map(grid).margin))
     sparse = SparseConfig(num_candidates=d.candidates, selection=d.selection, guidance=False,
@@ -249,7 +264,13 @@ def run_habits_benchmark(settings: HabitsBenchSettings, *, progress: bool = True
     chosen = _pairs(grid, operator, zones, settings)
     problems = [p for p, _, _ in chosen]
 
-    paths, times, fallbacks = {}, {}, {}
+    paths, times, fallbacks, shaping = {}, {}, {}, {}
+
+    def shaped(key, path, ms):  # path moved onto the lanes, recorded under key
+        t0 = time.perf_counter()
+        res = shape_path(path, field, grid, fp)
+        record(key, res.path, ms + (time.perf_counter() - t0) * 1e3)
+        shaping.setdefault(key, []).append((res.shaped, res.kept_original))
 
     def record(key, path, ms):
         paths.setdefault(key, []).append(np.asarray(path, dtype=np.float64).reshape(-1, 2))
@@ -259,7 +280,10 @@ def run_habits_benchmark(settings: HabitsBenchSettings, *, progress: bool = True
         record((OPERATOR, OPERATOR), route.path, route_ms)
         t0 = time.perf_counter()
         path = astar.plan(prob.start, prob.goal)
-        record((ASTAR, ASTAR), path, (time.perf_counter() - t0) * 1e3)
+        ms = (time.perf_counter() - t0) * 1e3
+        record((ASTAR, ASTAR), path, ms)
+        if field is not None:
+            shaped((ASTAR_LANES, ASTAR_LANES), path, ms)
     for name, (sd, hd, net) in planners.items():
         gen, net_gen = torch.Generator(), torch.Generator()
         rules = []
@@ -278,6 +302,8 @@ def run_habits_benchmark(settings: HabitsBenchSettings, *, progress: bool = True
             safe = net.apply(np.asarray(plan.trajectory, dtype=np.float64),
                              segments=plan.segments, generator=net_gen)
             record((name, "ECAHD + net"), safe.path, ms + safe.time_ms)
+            if field is not None:
+                shaped((name, LANES), safe.path, ms + safe.time_ms)
             rules.append(safe.rule)
         fallbacks[name] = 100.0 * float(np.mean([r == "fallback" for r in rules]))
         log.info("%s: %d pairs planned in %.0f s", name, len(problems),
@@ -285,7 +311,10 @@ def run_habits_benchmark(settings: HabitsBenchSettings, *, progress: bool = True
 
     rows = []
     checkpoints = dict(models)
-    keys = [(OPERATOR, OPERATOR), (ASTAR, ASTAR)] + [(n, p) for n in planners for p in PLANNERS]
+    planners_rows = PLANNERS + ((LANES,) if field is not None else ())
+    keys = ([(OPERATOR, OPERATOR), (ASTAR, ASTAR)]
+            + ([(ASTAR_LANES, ASTAR_LANES)] if field is not None else [])
+            + [(n, p) for n in planners for p in planners_rows])
     for key in keys:
         model, planner = key
         judged = judge_paths(paths[key], problems, fp, grid)
@@ -300,7 +329,11 @@ def run_habits_benchmark(settings: HabitsBenchSettings, *, progress: bool = True
             collision_free=100 * float(free.mean()), success=100 * float(success.mean()),
             success_free=100 * float((free & success).mean()), length_ratio=float(ratio.mean()),
             time_ms_median=float(np.median(ms)), time_ms_p95=float(np.percentile(ms, 95)),
-            fallback=fallbacks[model] if planner == "ECAHD + net" else None,
+            fallback=fallbacks[model] if planner in ("ECAHD + net", LANES) else None,
+            shaped=(100 * float(np.mean([a for a, _ in shaping[key]]))
+                    if key in shaping else None),
+            shape_dropped=(100 * float(np.mean([b for _, b in shaping[key]]))
+                           if key in shaping else None),
             free_by_problem=[bool(f) for f in free],
             time_ms_by_problem=[round(float(t), 2) for t in ms]))
     pairs = [[[round(float(v), 4) for v in p.start], [round(float(v), 4) for v in p.goal]]
@@ -316,10 +349,11 @@ def _cell(v, nd=1) -> str:
 def format_table(result: HabitsBenchResult) -> str:
     """The markdown table: the operator (the target), A*, then each model's three rows."""
     s = result.settings
-    zones = s.zones is not None
+    zones, lanes = s.zones is not None, s.lanes is not None
     lines = [f"Habits on {result.map_name}: {len(result.pairs)} held-out start/goal pairs (seed "
              f"{s.seed}), robot {s.robot}, operator habit {s.habit}"
              + (f", zones of {s.zones}" if zones else "")
+             + (f", lanes of {Path(s.lanes).name}" if lanes else "")
              + f", sampling seed {s.sample_seed} per problem, DD {s.dd_model or 'the map’s'}, "
              f"{result.seconds / 60:.1f} min. Right half: share of the corridor length on the "
              f"right half (corridors wider than twice the robot, at most 4 m)"
@@ -327,16 +361,20 @@ def format_table(result: HabitsBenchResult) -> str:
              "| model | planner | right half % | corridor m |"
              + (" in a zone % |" if zones else "")
              + " collision-free % | success % | success & free % | length / A* "
-             "| time median ms | time p95 ms | A* fallback % |",
-             "|---|---|---|---|" + ("---|" if zones else "") + "---|---|---|---|---|---|---|"]
+             "| time median ms | time p95 ms | A* fallback % |"
+             + (" shaped % | shaped, collided % |" if lanes else ""),
+             "|---|---|---|---|" + ("---|" if zones else "") + "---|---|---|---|---|---|---|"
+             + ("---|---|" if lanes else "")]
     for r in result.rows:
-        name = {OPERATOR: "operator (target)", ASTAR: "A* (expert)"}.get(r.model, r.model)
-        planner = "–" if r.model in (OPERATOR, ASTAR) else r.planner
+        name = {OPERATOR: "operator (target)", ASTAR: "A* (expert)",
+                ASTAR_LANES: "A* + lanes"}.get(r.model, r.model)
+        planner = "–" if r.model in (OPERATOR, ASTAR, ASTAR_LANES) else r.planner
         lines.append(f"| {name} | {planner} | {_cell(r.right)} | {r.corridor_m:.0f} |"
                      + (f" {_cell(r.zone)} |" if zones else "")
                      + f" {r.collision_free:.1f} | {r.success:.1f} | {r.success_free:.1f} | "
                      f"{r.length_ratio:.3f} | {r.time_ms_median:.0f} | {r.time_ms_p95:.0f} | "
-                     f"{_cell(r.fallback)} |")
+                     f"{_cell(r.fallback)} |"
+                     + (f" {_cell(r.shaped)} | {_cell(r.shape_dropped)} |" if lanes else ""))
     return "\n".join(lines)
 
 
@@ -388,6 +426,13 @@ def plot_habits(result: HabitsBenchResult, path) -> Path:
           result.paths[(OPERATOR, OPERATOR)], dashed=result.paths[(ASTAR, ASTAR)])
     for ax, name in zip(axes[1:], names):
         net, sd = result.row(name, "ECAHD + net"), result.row(name, "SD")
+        if s.lanes:  # solid: with the lanes; dashed: ECAHD + net without them
+            ln = result.row(name, LANES)
+            panel(ax, f"{name}: ECAHD + net + lanes, solid ({_cell(ln.right, 0)}% right, "
+                      f"{ln.collision_free:.0f}% free); without lanes, dashed "
+                      f"({_cell(net.right, 0)}% right)",
+                  result.paths[(name, LANES)], dashed=result.paths[(name, "ECAHD + net")])
+            continue
         panel(ax, f"{name}: ECAHD + net, solid ({_cell(net.right, 0)}% right, "
                   f"{net.collision_free:.0f}% free); SD, dotted ({_cell(sd.right, 0)}% right)",
               result.paths[(name, "ECAHD + net")], dotted=result.paths[(name, "SD")])
@@ -431,6 +476,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the first pairs planned by A*, the operator and each model")
     parser.add_argument("--figure-problems", type=int, default=d.figure_problems, metavar="K",
                         help="pairs drawn by --png")
+    parser.add_argument("--lanes", metavar="FIELD", default=None,
+                        help="a lane field of the map (`ecahd lanes`): adds the rows with "
+                             "plans moved onto it (ECAHD + net + lanes, A* + lanes)")
     parser.add_argument("--json", metavar="FILE", help="also write every row as JSON")
     parser.add_argument("--md", metavar="FILE", help="also write the table as markdown")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
@@ -442,7 +490,7 @@ def run(args: argparse.Namespace) -> int:
     settings = HabitsBenchSettings(
         map=args.map, models=parse_models(args.models), problems=args.problems, seed=args.seed,
         sample_seed=args.sample_seed, robot=args.robot, habit=args.habit, zones=args.zones,
-        dd_model=args.dd_model, figure_problems=args.figure_problems)
+        dd_model=args.dd_model, figure_problems=args.figure_problems, lanes=args.lanes)
     result = run_habits_benchmark(settings, progress=not args.no_progress)
     table = format_table(result)
     print(table)

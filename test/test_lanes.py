@@ -1,0 +1,158 @@
+"""Lane fields learnt from demonstrations and plans moved onto them (ecahd_core.lanes, issue 41).
+
+A 20 x 8 m map with two corridors side by side (y 2.5..5.5 m and, behind a 0.5 m wall, y
+6..7.5 m); demonstrations keep right in the wide one: eastwards at y 3.3, westwards at y 4.7."""
+import json
+
+import numpy as np
+import pytest
+
+from ecahd_core.collision import check_collision
+from ecahd_core.errors import EcahdError
+from ecahd_core.footprint import make_footprint
+from ecahd_core.lanes import (LaneConfig, LaneField, ShapeConfig, demonstration_paths,
+                              plot_lanes, shape_path)
+from ecahd_core.maps import GridMap
+
+RES = 0.05
+EAST_Y, WEST_Y, CENTRE_Y = 3.3, 4.7, 4.0
+
+
+def corridors() -> GridMap:
+    data = np.full((int(8 / RES), int(20 / RES)), 100, dtype=np.int8)
+    y = (np.arange(data.shape[0]) + 0.5) * RES
+    x = (np.arange(data.shape[1]) + 0.5) * RES
+    inside = (x > 0.5) & (x < 19.5)
+    data[np.ix_((y > 2.5) & (y < 5.5), inside)] = 0
+    data[np.ix_((y > 6.0) & (y < 7.5), inside)] = 0
+    return GridMap(data=data, resolution=RES, origin=(0.0, 0.0), name="corridors")
+
+
+def line(a, b, n: int = 60) -> np.ndarray:
+    return np.linspace(a, b, n)
+
+
+def keep_right_demos() -> list[np.ndarray]:
+    out = []
+    for k in range(6):  # a little spread, as a driver's
+        dy = 0.05 * (k - 2.5)
+        out.append(line((1.5, EAST_Y + dy), (18.5, EAST_Y + dy)))
+        out.append(line((18.5, WEST_Y + dy), (1.5, WEST_Y + dy)))
+    return out
+
+
+@pytest.fixture(scope="module")
+def grid():
+    return corridors()
+
+
+@pytest.fixture(scope="module")
+def field(grid):
+    return LaneField.fit(keep_right_demos(), grid, source="synthetic")
+
+
+def test_the_field_holds_each_direction_where_it_was_driven(field):
+    east, west = 0.0, np.pi
+    at_east, at_west = np.array([10.0, EAST_Y]), np.array([10.0, WEST_Y])
+    assert field.value(at_east, east) > 0.5 and field.value(at_west, west) > 0.5
+    assert field.value(at_east, west) < 0.05 and field.value(at_west, east) < 0.05
+    assert field.value(np.array([10.0, 6.75]), east) == 0.0  # never driven there
+    # a heading between two bins reads both; broadcasting over points
+    v = field.value(np.array([[10.0, EAST_Y], [10.0, WEST_Y]]), np.array([0.1, np.pi - 0.1]))
+    assert v.shape == (2,) and np.all(v > 0.3)
+    assert field.paths == 12 and field.length == pytest.approx(12 * 17.0, rel=1e-3)
+
+
+@pytest.mark.parametrize("start, goal, lane_y", [((2.0, CENTRE_Y), (18.0, CENTRE_Y), EAST_Y),
+                                                  ((18.0, CENTRE_Y), (2.0, CENTRE_Y), WEST_Y)])
+def test_a_centre_line_plan_moves_onto_its_directions_lane(field, grid, start, goal, lane_y):
+    fp = make_footprint("circle")
+    res = shape_path(line(start, goal, 17), field, grid, fp)
+    assert res.shaped and not res.kept_original
+    p = res.path
+    np.testing.assert_allclose(p[0], start)
+    np.testing.assert_allclose(p[-1], goal)
+    middle = p[(p[:, 0] > 5.0) & (p[:, 0] < 15.0)]
+    assert len(middle) > 50
+    np.testing.assert_allclose(middle[:, 1], lane_y, atol=0.1)
+    assert res.max_offset == pytest.approx(abs(lane_y - CENTRE_Y), abs=0.1)
+    assert check_collision(p, fp, grid).collision_free
+
+
+def test_where_nobody_drove_and_never_over_a_wall_the_plan_stays(field, grid):
+    fp = make_footprint("circle")
+    # the narrow corridor: the lanes lie behind the wall, within reach but not reachable
+    plan = line((2.0, 6.75), (18.0, 6.75), 17)
+    res = shape_path(plan, field, grid, fp, ShapeConfig(reach=2.5))
+    assert not res.shaped and not res.kept_original
+    np.testing.assert_array_equal(res.path, plan)
+    # a field fitted on the narrow corridor only leaves the wide one's plans alone
+    other = LaneField.fit([line((1.5, 6.75), (18.5, 6.75))], grid)
+    res = shape_path(line((2.0, CENTRE_Y), (18.0, CENTRE_Y), 17), other, grid, fp,
+                     ShapeConfig(reach=2.5))
+    assert not res.shaped
+
+
+def test_a_shaped_plan_in_collision_is_not_used(field, grid):
+    fp = make_footprint("circle")
+    plan = line((2.0, CENTRE_Y), (18.0, CENTRE_Y), 17)
+    # no clearance asked of the searched points: the lane is searched up to the wall itself
+    wall_lanes = LaneField.fit([line((1.5, 2.55), (18.5, 2.55))], grid)
+    res = shape_path(plan, wall_lanes, grid, fp, ShapeConfig(clearance=0.0))
+    assert res.kept_original and not res.shaped
+    np.testing.assert_array_equal(res.path, plan)
+    # with the footprint's clearance the same field only takes it as near as is free
+    res = shape_path(plan, wall_lanes, grid, fp)
+    assert res.shaped and check_collision(res.path, fp, grid).collision_free
+
+
+def test_save_load_and_bad_files(field, grid, tmp_path):
+    path = field.save(tmp_path / "lanes.npz")
+    back = LaneField.load(path)
+    np.testing.assert_array_equal(back.density, field.density)
+    assert back.config == field.config and back.origin == field.origin
+    assert (back.map_fingerprint, back.paths, back.source) == (field.map_fingerprint, 12,
+                                                               "synthetic")
+    back.check_map(grid)
+    other = GridMap(data=grid.data[:, :200].copy(), resolution=RES, name="other")
+    with pytest.raises(EcahdError, match="does not belong to map 'other'"):
+        back.check_map(other)
+    with pytest.raises(EcahdError, match="no such file"):
+        LaneField.load(tmp_path / "missing.npz")
+    cut = tmp_path / "cut.npz"
+    cut.write_bytes(path.read_bytes()[:200])
+    with pytest.raises(EcahdError, match=f"lane field {cut}: unreadable"):
+        LaneField.load(cut)
+    other_kind = tmp_path / "kind.npz"
+    np.savez(other_kind, density=field.density, meta=json.dumps({"kind": "x", "version": 1}))
+    with pytest.raises(EcahdError, match="expected 'ecahd-lanes'"):
+        LaneField.load(other_kind)
+
+
+def test_bad_settings_and_no_demonstrations(grid):
+    with pytest.raises(EcahdError, match="bins must be an integer >= 4"):
+        LaneConfig(bins=2)
+    with pytest.raises(EcahdError, match="sigma must be a finite number > 0"):
+        LaneConfig(sigma=float("nan"))
+    with pytest.raises(EcahdError, match="reach must be a finite number > 0"):
+        ShapeConfig(reach=0)
+    with pytest.raises(EcahdError, match="no demonstration has any length"):
+        LaneField.fit([np.zeros((3, 2)), np.array([[-50.0, -50.0], [-40.0, -50.0]])], grid)
+
+
+class _Data:  # what demonstration_paths reads of an ExpertDataset
+    def __init__(self, params, n=4):
+        self.params, self.full, self.map_name = params, np.arange(n * 6.0).reshape(n, 3, 2), "m"
+
+
+def test_demonstrations_of_a_dataset_never_the_experts():
+    assert len(demonstration_paths(_Data({"source": "demonstrations"}))) == 4
+    mixed = demonstration_paths(_Data({"mixed": {"demonstrations": 3, "expert": 1}}))
+    assert len(mixed) == 3  # the demonstrations come first in a mix
+    with pytest.raises(EcahdError, match="holds no demonstrations"):
+        demonstration_paths(_Data({"seed": 0}))
+
+
+def test_figure(field, grid, tmp_path):
+    png = plot_lanes(field, grid, tmp_path / "lanes.png")
+    assert png.stat().st_size > 10_000 and not list(tmp_path.glob("*.tmp"))
