@@ -31,6 +31,16 @@ returned as it came (``ShapeResult.kept_original``). So a lane field changes whe
 corridor a plan runs, never which corridors it takes, and never puts the robot into anything
 the map knows about.
 
+At SD's level (:class:`WaypointLanes`, on :class:`~ecahd_core.planning.rules.SparseStage`):
+every interior waypoint of each iteration's sparse plan moves sideways onto the lane the same
+way (no smoothing; the number of waypoints is kept), so the legs DD refines run in the lane.
+The nodes' ``lanes`` parameter turns both on: global_planner moves SD's waypoints,
+local_refiner moves each safe local plan (:class:`~ecahd_core.planning.local.SegmentRefiner`).
+Why both: J's margin (0.5 m on building maps) makes DD's guidance and polishing pull a plan
+near a wall back towards the corridor's middle, so the waypoints alone do not keep a refined
+plan in a lane near the wall (measured: the waypoints moved, ECAHD's right share 45-52% as
+without lanes); the local plans moved after refinement do.
+
 Units: metres, radians, map frame. Shapes at the function boundaries. No rclpy.
 """
 from __future__ import annotations
@@ -218,11 +228,21 @@ class LaneField:
         return out.reshape(lead)
 
     def check_map(self, grid) -> None:
-        """EcahdError unless ``grid`` is the map the field was fitted on."""
-        if grid.fingerprint() != self.map_fingerprint:
-            raise EcahdError(f"lane field of map {self.map_name!r} (fingerprint "
-                             f"{self.map_fingerprint}) does not belong to map {grid.name!r} "
-                             f"(fingerprint {grid.fingerprint()}): fit it on this map")
+        """EcahdError unless ``grid`` has the extent of the map the field was fitted on (the
+        same origin and size). An updated map of the same site passes (its fingerprint may
+        differ): a plan moved onto a lane is still judged by the exact checker on ``grid``."""
+        c = self.config.cell
+        shape = (max(1, math.ceil(grid.height * grid.resolution / c)),
+                 max(1, math.ceil(grid.width * grid.resolution / c)))
+        same_origin = np.allclose(grid.origin, self.origin, atol=1e-6)
+        if tuple(self.density.shape[1:]) != shape or not same_origin:
+            H, W = self.density.shape[1:]
+            raise EcahdError(
+                f"lane field of map {self.map_name!r} ({W * c:g} x {H * c:g} m from "
+                f"({self.origin[0]:g}, {self.origin[1]:g})) does not belong to map "
+                f"{grid.name!r} ({grid.width * grid.resolution:g} x "
+                f"{grid.height * grid.resolution:g} m from ({grid.origin[0]:g}, "
+                f"{grid.origin[1]:g})): fit it on this map (ecahd lanes)")
 
     # ------------------------------------------------------------------ files
     def save(self, path) -> Path:
@@ -327,6 +347,73 @@ def shape_path(path, field: LaneField, grid, footprint, config: ShapeConfig | No
         return ShapeResult(path=original, shaped=False, kept_original=True, max_offset=0.0)
     return ShapeResult(path=shaped, shaped=True, kept_original=False,
                        max_offset=float(np.abs(shift).max()))
+
+
+class WaypointLanes:
+    """The lanes at SD's level, for Algorithm 1 (:class:`~ecahd_core.planning.rules.
+    SparseStage`, so the nodes and the benchmarks alike): every interior waypoint of a sparse
+    plan moves sideways (across the chord of its neighbours) to the free offset with the largest
+    lane value in that direction, as :func:`shape_path` moves a point, but with no smoothing: the
+    straight legs between two waypoints in one lane run along it, and DD refines the legs as
+    before. A move is kept only if neither leg next to the waypoint collides by the exact checker
+    where it did not before. The start (the robot) and the goal never move; the number of
+    waypoints never changes (Algorithm 1's horizon is kept).
+
+    Args:
+        field: the LaneField (of ``grid``: :meth:`LaneField.check_map` is called).
+        grid: the GridMap; footprint: the Footprint.
+        config: ShapeConfig (reach, step, min_value, clearance, margin are used).
+    """
+
+    def __init__(self, field: LaneField, grid, footprint, config: ShapeConfig | None = None):
+        field.check_map(grid)
+        self.field, self.grid, self.footprint = field, grid, footprint
+        self.config = config or ShapeConfig()
+        self.moved = 0  # waypoints moved, all calls together
+        self.refused = 0  # moves refused by the exact checker
+
+    def __call__(self, waypoints) -> np.ndarray:
+        """(P, 2) [m] -> (P, 2) [m], a new array."""
+        from ecahd_core.collision import check_collision, wall_distance
+
+        cfg = self.config
+        wp = np.array(waypoints, dtype=np.float64).reshape(-1, 2)
+        if len(wp) < 3:
+            return wp
+        chord = wp[2:] - wp[:-2]
+        norm = np.linalg.norm(chord, axis=1)
+        offsets = np.arange(-round(cfg.reach / cfg.step), round(cfg.reach / cfg.step) + 1) \
+            * cfg.step
+        zero = len(offsets) // 2
+        clearance = (self.footprint.circumscribed_radius + cfg.margin if cfg.clearance is None
+                     else cfg.clearance)
+
+        def leg_free(a, b) -> bool:
+            return check_collision(np.stack([a, b]), self.footprint, self.grid).collision_free
+
+        for i in range(1, len(wp) - 1):
+            if norm[i - 1] < 1e-6:
+                continue
+            t = chord[i - 1] / norm[i - 1]
+            n = np.array([-t[1], t[0]])
+            cand = wp[i] + offsets[:, None] * n  # (S, 2)
+            free = wall_distance(self.grid, cand) >= clearance
+            reach = np.zeros_like(free)
+            reach[zero:] = np.cumprod(free[zero:]).astype(bool)
+            reach[:zero + 1] |= np.cumprod(free[zero::-1]).astype(bool)[::-1]
+            val = np.where(reach, self.field.value(cand, math.atan2(t[1], t[0])), -1.0)
+            best = int(np.argmax(val))
+            if val[best] < cfg.min_value or best == zero:
+                continue
+            moved = cand[best]
+            before = (leg_free(wp[i - 1], wp[i]), leg_free(wp[i], wp[i + 1]))
+            after = (leg_free(wp[i - 1], moved), leg_free(moved, wp[i + 1]))
+            if (before[0] and not after[0]) or (before[1] and not after[1]):
+                self.refused += 1
+                continue
+            wp[i] = moved
+            self.moved += 1
+        return wp
 
 
 # ---------------------------------------------------------------------- helpers

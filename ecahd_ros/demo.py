@@ -144,6 +144,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "8080): http://localhost:PORT (the web_view node)")
     p.add_argument("--domain-id", type=int, default=None,
                    help="ROS_DOMAIN_ID of the private context (default: from the process id)")
+    p.add_argument("--lanes", default=None, metavar="FIELD",
+                   help="a lane field of the map (`ecahd lanes`): the nodes' `lanes` "
+                        "parameter (plans moved onto where the robot was driven)")
     add_obstacle_arguments(p)
 
 
@@ -512,8 +515,12 @@ def run(args: argparse.Namespace) -> int:
                         view_port=args.view,
                         moving=args.moving, first_episode=args.first_episode,
                         models=Path(args.models) if args.models else None,
-                        planner_params={"method": args.method},
-                        refiner_params={"dd_enabled": not args.no_dd})
+                        planner_params={"method": args.method,
+                                        **({"lanes": str(Path(args.lanes).resolve())}
+                                           if args.lanes else {})},
+                        refiner_params={"dd_enabled": not args.no_dd,
+                                        **({"lanes": str(Path(args.lanes).resolve())}
+                                           if args.lanes else {})})
     result = run_demo(config)
     print(result.table)
     print(f"episodes: {result.wall_s:.1f} s wall, {result.sim_s:.1f} s sim time; bag "

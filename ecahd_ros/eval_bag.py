@@ -52,6 +52,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -482,6 +483,26 @@ def _draw_obstacles(ax, obstacles, color) -> None:
             ax.fill(poly[:, 0], poly[:, 1], color=color, alpha=0.55, ec="k", lw=0.5)
 
 
+def driven_habit(result: BagEvaluation):
+    """The keep-right measure of issue 41 over the driven paths of every episode
+    (``operator.habit_metrics``: the share of the corridor length, corridors wider than twice
+    the robot and at most 4 m, driven on the right half relative to the direction of travel)."""
+    from ecahd_core.operator import habit_metrics
+
+    paths = [np.asarray(ep.odom, dtype=np.float64)[:, 1:3] for ep in result.episodes
+             if len(ep.odom) >= 2]
+    return habit_metrics(paths, result.grid, result.footprint)
+
+
+def habit_line(habit) -> str:
+    """One markdown line for :func:`driven_habit`'s measure."""
+    if math.isnan(habit.right_share):
+        return "\nHabit: the robot drove through no corridor wider than twice its size.\n"
+    return (f"\nHabit: the robot drove on the right half of its corridors for "
+            f"{100 * habit.right_share:.1f}% of {habit.corridor_length:.0f} m (corridors wider "
+            f"than twice the robot, at most 4 m; relative to its direction of travel).\n")
+
+
 def write_outputs(result: BagEvaluation, bag, *, json_path=None, md_path=None,
                   png_path=None, extra: dict | None = None, notes: str = "",
                   scenarios: list | None = None) -> str:
@@ -490,9 +511,14 @@ def write_outputs(result: BagEvaluation, bag, *, json_path=None, md_path=None,
     ``scenarios``: per episode, the obstacles not on the map, for the figure."""
     from ecahd_core.evaluation import markdown_table
 
-    table = markdown_table(result.summary, result.metrics) + result.sources.markdown() + notes
+    habit = driven_habit(result)
+    table = (markdown_table(result.summary, result.metrics) + result.sources.markdown()
+             + habit_line(habit) + notes)
     if json_path:
-        write_json(json_path, {**result.to_dict(str(bag)), **(extra or {})})
+        write_json(json_path, {**result.to_dict(str(bag)), "habit": {
+            "corridor_m": round(habit.corridor_length, 2),
+            "right_share": None if math.isnan(habit.right_share)
+            else round(habit.right_share, 4)}, **(extra or {})})
     if md_path:
         rate = ("% of sim steps in contact" if result.sources.contacts_from == "simulator" else
                 "% of poses whose footprint overlaps the map, by the exact checker")

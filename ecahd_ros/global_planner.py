@@ -93,7 +93,8 @@ from ecahd_ros.global_planner_params import PARAMETERS, GlobalPlannerParams
 from ecahd_ros import nav2_actions
 from ecahd_ros.lifecycle import ManagedNode
 from ecahd_ros.nav2_actions import GoalError, check_point, pose_in_frame
-from ecahd_ros.params import collision_cost, declare_parameters, make_robot, read_parameters
+from ecahd_ros.params import (collision_cost, declare_parameters, lanes_for, load_lanes, make_robot,
+                              read_parameters)
 from ecahd_ros.qos import MAP_QOS, PLAN_QOS, STREAM_QOS, VIZ_QOS
 from ecahd_ros.spin import spin_node
 from ecahd_ros.tf_listener import TfListener, placed_odometry
@@ -139,6 +140,7 @@ class GlobalPlanner(ManagedNode):
 
         # the generalist SD plans on any map: a map of another extent is planned on at once
         self._general = p.method == "sd" and is_general("sd", p.sd_model, p.map_name)
+        self._lanes = load_lanes(p.lanes)  # an unreadable lane field fails now
         from ecahd_core.threads import lower_priority, set_torch_threads
 
         import torch
@@ -248,7 +250,8 @@ class GlobalPlanner(ManagedNode):
         had_goal = self.goal is not None
         self._sd, self._dense, self._site = built.get("sd"), None, learnt
         self.map_changed = changed
-        self.planning.set_map(grid, **built, learnt=learnt)
+        self.planning.set_map(grid, **built, learnt=learnt,
+                              lanes=lanes_for(self._lanes, grid, self.get_logger()))
         if learnt is not grid:
             log = self.get_logger().warning if changed > p.map_change_warn else \
                 self.get_logger().info

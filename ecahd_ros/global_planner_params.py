@@ -94,7 +94,7 @@ PARAMETERS = [
     ParamSpec("nice", 0, "nice increment of the thread that plans, so that planning yields "
                          "the CPU to the controller on a busy computer; 0 = unchanged (5 "
                          "changed no closed-loop figure, docs/RESULTS.md)"),
-    *shared("dd_model", "map_change_warn", "yaw_goal_tolerance"),
+    *shared("dd_model", "map_change_warn", "yaw_goal_tolerance", "lanes"),
     ParamSpec("heading_timeout", _MISSION.align_timeout, "[s] navigate_to_pose: a goal whose position is reached but "
                                  "not its heading within this fails (turning in place "
                                  "blocked)"),

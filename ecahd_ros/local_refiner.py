@@ -101,8 +101,8 @@ from ecahd_ros.diagnostics import (DIAGNOSTICS_PERIOD, Latencies, RateMeter, dia
                                    node_status)
 from ecahd_ros.lifecycle import ManagedNode
 from ecahd_ros.local_refiner_params import DYNAMIC, PARAMETERS, LocalRefinerParams
-from ecahd_ros.params import (collision_cost, declare_parameters, make_robot, on_parameter_change,
-                              read_parameters)
+from ecahd_ros.params import (collision_cost, declare_parameters, lanes_for, load_lanes, make_robot,
+                              on_parameter_change, read_parameters)
 from ecahd_ros.qos import MAP_QOS, PLAN_QOS, SCAN_QOS, STREAM_QOS, VIZ_QOS
 from ecahd_ros.spin import spin_node
 from ecahd_ros.tf_listener import TfListener, placed_odometry
@@ -142,6 +142,7 @@ class LocalRefiner(ManagedNode):
 
         # the segment-frame DD refines segments on any map: another extent is taken at once
         self._general = p.dd_enabled and is_general("dd", p.dd_model, p.map_name)
+        self._lanes = load_lanes(p.lanes)  # an unreadable lane field fails now
         from ecahd_core.threads import set_torch_threads
 
         import torch
@@ -272,7 +273,8 @@ class LocalRefiner(ManagedNode):
             dense=DenseConfig(c_th=p.c_th, enabled=p.dd_enabled,
                               polish_steps=p.polish_steps))
         refiner = SegmentRefiner(planner, grid, self.judged,
-                                 generator=self.generator, exact=p.exact_check)
+                                 generator=self.generator, exact=p.exact_check,
+                                 lanes=lanes_for(self._lanes, grid, self.get_logger()))
         from ecahd_core.sensing import StaticClearance
 
         world, static = None, StaticClearance(grid)

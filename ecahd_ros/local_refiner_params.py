@@ -15,7 +15,7 @@ from ecahd_ros.params import (ParamSpec, parameters_dataclass, require, require_
 _MONITOR = CollisionMonitorConfig()
 
 PARAMETERS = [
-    *shared("dd_model", "map_change_warn"),
+    *shared("dd_model", "map_change_warn", "lanes"),
     *shared("map_name", "robot", "footprint", "footprint_padding", "global_frame",
             "transform_tolerance", "clearance_margin", "cost_margin"),
     ParamSpec("c_th", DenseConfig().c_th, "DD refines a local plan whose collision cost c^l "

@@ -176,6 +176,12 @@ SHARED = {spec.name: spec for spec in [
     ParamSpec("dd_model", "", "DD checkpoint path; '' = the shipped model for map_name; "
                               "'general' = the shipped segment-frame DD (any map) "
                               "(global_planner: compute_path_to_pose's dense path)"),
+    ParamSpec("lanes", "", "a lane field of this map (`ecahd lanes`, learnt from the robot's "
+                           "demonstrations): global_planner moves SD's waypoints and "
+                           "local_refiner its local plans sideways onto where the robot was "
+                           "driven in their direction (never into collision); '' = off; "
+                           "unreadable: the node fails at start-up; a map it does not belong "
+                           "to: logged, planned without lanes"),
     ParamSpec("seed", 0, "seed of the sampler's torch.Generator (a seed reproduces the plans)"),
     ParamSpec("yaw_goal_tolerance", 0.25, "[rad] a goal with a heading (navigate_to_pose, or "
                                           "goal_pose with a non-zero orientation) is reached "
@@ -219,3 +225,28 @@ def make_robot(params, *, margin: float = 0.0):
 
     return make_footprint(robot_spec(params.robot, params.footprint),
                           padding=params.footprint_padding + margin)
+
+
+def load_lanes(path: str):
+    """The LaneField at ``path`` (``ecahd lanes``), or None for ''. An unreadable file raises
+    EcahdError naming it: bad configuration fails the node at start-up."""
+    if not path:
+        return None
+    from ecahd_core.lanes import LaneField
+
+    return LaneField.load(path)
+
+
+def lanes_for(field, grid, logger):
+    """``field`` if it belongs to ``grid`` (its extent), else None with one error line (a map
+    the lane field was not fitted on is planned on without lanes; the node keeps running)."""
+    if field is None:
+        return None
+    from ecahd_core.errors import EcahdError
+
+    try:
+        field.check_map(grid)
+    except EcahdError as exc:
+        logger.error(f"lanes off on this map: {exc}")
+        return None
+    return field

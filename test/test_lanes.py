@@ -156,3 +156,95 @@ def test_demonstrations_of_a_dataset_never_the_experts():
 def test_figure(field, grid, tmp_path):
     png = plot_lanes(field, grid, tmp_path / "lanes.png")
     assert png.stat().st_size > 10_000 and not list(tmp_path.glob("*.tmp"))
+
+
+def test_waypoint_lanes_move_interior_waypoints_never_the_ends(field, grid):
+    from ecahd_core.lanes import WaypointLanes
+
+    lanes = WaypointLanes(field, grid, make_footprint("circle"))
+    east = np.array([[2.0, CENTRE_Y], [6.0, CENTRE_Y], [10.0, CENTRE_Y], [14.0, CENTRE_Y],
+                     [18.0, CENTRE_Y]])
+    out = lanes(east)
+    assert out.shape == east.shape and lanes.moved == 3
+    np.testing.assert_array_equal(out[[0, -1]], east[[0, -1]])
+    np.testing.assert_allclose(out[1:-1, 1], EAST_Y, atol=0.1)
+    np.testing.assert_allclose(out[1:-1, 0], east[1:-1, 0])
+    west = lanes(east[::-1])
+    np.testing.assert_allclose(west[1:-1, 1], WEST_Y, atol=0.1)
+    assert lanes(east[:2]).shape == (2, 2)  # nothing interior: as it came
+    # a waypoint whose move would put a leg that was free into the wall stays: the lane of
+    # a field fitted along the wall lies beyond the footprint's reach from (10, 3)
+    near_wall = LaneField.fit([line((1.5, 2.6), (18.5, 2.6))], grid)
+    strict = WaypointLanes(near_wall, grid, make_footprint("circle"), ShapeConfig(clearance=0.0))
+    wp = np.array([[2.0, 3.5], [10.0, 3.5], [18.0, 3.5]])
+    np.testing.assert_array_equal(strict(wp), wp)
+    assert strict.refused == 1 and strict.moved == 0
+
+
+def test_segment_refiner_moves_a_safe_local_plan_onto_the_lane(field, grid):
+    from ecahd_core.cost import CollisionCost, CostConfig
+    from ecahd_core.planning.dense import DenseConfig, DenseStage
+    from ecahd_core.planning.local import SegmentRefiner
+
+    fp = make_footprint("circle")
+    cost = CollisionCost.build(grid, fp, CostConfig(margin=0.1))
+    stage = DenseStage(None, costmap=cost.costmap, footprint_points=cost.footprint_points,
+                       cost_config=cost.config, dense=DenseConfig(enabled=False))
+    a, b = np.array([2.0, CENTRE_Y]), np.array([18.0, CENTRE_Y])
+    plain = SegmentRefiner(stage, grid, fp)(a, b)
+    assert not plain.shaped and np.allclose(plain.plan[:, 1], CENTRE_Y)
+    res = SegmentRefiner(stage, grid, fp, lanes=field)(a, b)
+    assert res.safe and res.shaped
+    np.testing.assert_array_equal(res.plan[[0, -1]], [a, b])
+    middle = res.plan[(res.plan[:, 0] > 5.0) & (res.plan[:, 0] < 15.0)]
+    np.testing.assert_allclose(middle[:, 1], EAST_Y, atol=0.1)
+
+
+def test_nodes_lanes_parameter(field, grid, tmp_path):
+    """The nodes' ``lanes``: '' off; an unreadable file fails (start-up); a map it does not
+    belong to: one error line, planned without lanes; an update of the same site: used."""
+    from ecahd_ros.params import lanes_for, load_lanes
+
+    class Log:
+        def __init__(self):
+            self.lines = []
+
+        def error(self, text):
+            self.lines.append(text)
+
+    assert load_lanes("") is None
+    with pytest.raises(EcahdError, match="no such file"):
+        load_lanes(str(tmp_path / "none.npz"))
+    loaded = load_lanes(str(field.save(tmp_path / "l.npz")))
+    log = Log()
+    assert lanes_for(loaded, grid, log) is loaded and not log.lines
+    updated = grid.data.copy()
+    updated[60:80, 180:200] = 100  # a 1 x 1 m block put in the corridor: the same site
+    site = GridMap(data=updated, resolution=RES, name="corridors")
+    assert lanes_for(loaded, site, log) is loaded and not log.lines
+    other = GridMap(data=grid.data[:, :200].copy(), resolution=RES, name="other")
+    assert lanes_for(loaded, other, log) is None
+    assert len(log.lines) == 1 and "lanes off on this map" in log.lines[0]
+    assert lanes_for(None, other, log) is None and len(log.lines) == 1
+
+
+def test_eval_bag_reports_the_driven_habit(grid):
+    from types import SimpleNamespace
+
+    from ecahd_ros.eval_bag import driven_habit, habit_line
+
+    def episode(xs, y):
+        t = np.arange(len(xs)) * 0.1
+        return SimpleNamespace(odom=np.stack([t, xs, np.full(len(xs), y), t * 0], axis=1))
+
+    xs = np.linspace(2.0, 18.0, 161)
+    right = SimpleNamespace(episodes=[episode(xs, EAST_Y), episode(xs[::-1], WEST_Y)],
+                            grid=grid, footprint=make_footprint("circle"))
+    habit = driven_habit(right)
+    assert habit.right_share == pytest.approx(1.0) and habit.corridor_length > 30
+    assert "right half of its corridors for 100.0% of 32 m" in habit_line(habit)
+    left = SimpleNamespace(episodes=[episode(xs, WEST_Y)], grid=grid,
+                           footprint=make_footprint("circle"))
+    assert driven_habit(left).right_share == pytest.approx(0.0)
+    none = SimpleNamespace(episodes=[], grid=grid, footprint=make_footprint("circle"))
+    assert "no corridor" in habit_line(driven_habit(none))

@@ -24,6 +24,8 @@ from ecahd_ros.spin import CONFIGURE_EXIT_CODE, spin_forever  # noqa: E402
     ("ecahd_ros.global_planner", ["robot:=spaceship"], "spaceship"),
     ("ecahd_ros.local_refiner", ["dd_model:=/nonexistent/dd.pt"], "does not exist"),
     ("ecahd_ros.local_refiner", ["control_rate:=-1.0"], "control_rate"),
+    ("ecahd_ros.global_planner", ["lanes:=/nonexistent/lanes.npz"],
+     "lane field /nonexistent/lanes.npz: no such file"),
 ])
 def test_a_node_that_cannot_configure_exits_with_one_line(module, params, reason,
                                                           ros_domain_id):

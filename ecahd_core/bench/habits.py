@@ -14,10 +14,12 @@ checkpoints (``NAME=CKPT``; "general" is the shipped generalist) plans every pai
   builds its ECAHD cell (the same defaults, :class:`~ecahd_core.bench.planning.
   PlanningBenchSettings`), with the map's DD (``--dd-model``);
 - **ECAHD + net**: that same plan through the safety net (``ecahd_core.safety``);
-- **ECAHD + net + lanes** (``--lanes FIELD``, ``ecahd lanes``): that plan moved sideways onto
-  the lane field learnt from the demonstrations (``ecahd_core.lanes.shape_path``: never into
-  collision; a shaped plan the exact checker rejects is kept as it came). With ``--lanes`` A*'s
-  paths are shaped too (row "A* + lanes").
+- **ECAHD + net + lanes** (``--lanes FIELD``, ``ecahd lanes``): ECAHD as the nodes run it with
+  the ``lanes`` parameter: SD's waypoints moved onto the lane field learnt from the
+  demonstrations in every iteration (``ecahd_core.lanes.WaypointLanes``, as global_planner),
+  the net, then the plan moved sideways onto the lanes (``lanes.shape_path``, as local_refiner
+  does to each local plan; never into collision: a shaped plan the exact checker rejects is
+  kept as it came). With ``--lanes`` A*'s paths are shaped too (row "A* + lanes").
 
 Beside them, on the same pairs: **A*** with the footprint's clearance (the expert; about 50% on
 the right half) and the **operator** of ``ecahd record-demos`` (``ecahd_core.operator``: its
@@ -212,7 +214,7 @@ def run_habits_benchmark(settings: HabitsBenchSettings, *, progress: bool = True
     from ecahd_core.bench.replan import load_bench_map
     from ecahd_core.cost import CollisionCost, CostConfig
     from ecahd_core.footprint import make_footprint
-    from ecahd_core.lanes import LaneField, shape_path
+    from ecahd_core.lanes import LaneField, WaypointLanes, shape_path
     from ecahd_core.operator import Operator, OperatorConfig, habit_metrics
     from ecahd_core.planning.dense import DenseConfig
     from ecahd_core.planning.hierarchical import HierarchicalPlanner
@@ -246,20 +248,29 @@ def run_habits_benchmark(settings: HabitsBenchSettings, *, progress: bool = True
                         polish_steps=d.polish_steps, keep_better=d.keep_better)
     astar = planner_for(grid, clearance_for_footprint(fp))
     planners = {}
+
+    def ecahd(sd, lanes=None):  # Algorithm 1 with our rules and its safety net
+        hd = HierarchicalPlanner.for_map(
+            grid, fp, sd, dense=dense, replan=d.replan, replan_spacing=d.replan_spacing,
+            backtracks=d.backtracks, subgoals=d.subgoals, settle=d.settle,
+            exact=d.exact_rule, model=settings.dd_model)
+        hd.stage.lanes = lanes
+        net = SafetyNet(grid, fp, SafetyNetConfig(retries=d.net_retries,
+                                                  resamples=d.net_resamples),
+                        planner=hd, astar=astar)
+        return hd, net
+
     for name, ckpt in models:  # every checkpoint checked before any planning
         try:
             sd = SparseDiffusion.for_map(grid, fp, sparse, cost=cost, place_reach=d.place_reach,
                                          model=ckpt)
-            hd = HierarchicalPlanner.for_map(
-                grid, fp, sd, dense=dense, replan=d.replan, replan_spacing=d.replan_spacing,
-                backtracks=d.backtracks, subgoals=d.subgoals, settle=d.settle,
-                exact=d.exact_rule, model=settings.dd_model)
+            hd, net = ecahd(sd)
+            # + lanes: as the nodes run it, SD's waypoints moved onto the lanes in every
+            # iteration (global_planner), the refined plan moved onto them (local_refiner)
+            laned = ecahd(sd, WaypointLanes(field, grid, fp)) if field is not None else None
         except EcahdError as exc:
             raise EcahdError(f"--models {name}={ckpt}: {exc}") from None
-        net = SafetyNet(grid, fp, SafetyNetConfig(retries=d.net_retries,
-                                                  resamples=d.net_resamples),
-                        planner=hd, astar=astar)
-        planners[name] = (sd, hd, net)
+        planners[name] = (sd, hd, net, laned)
     operator = Operator(grid, fp, zones, OperatorConfig(keep_right=settings.habit == "keep-right"))
     chosen = _pairs(grid, operator, zones, settings)
     problems = [p for p, _, _ in chosen]
@@ -284,9 +295,9 @@ def run_habits_benchmark(settings: HabitsBenchSettings, *, progress: bool = True
         record((ASTAR, ASTAR), path, ms)
         if field is not None:
             shaped((ASTAR_LANES, ASTAR_LANES), path, ms)
-    for name, (sd, hd, net) in planners.items():
+    for name, (sd, hd, net, laned) in planners.items():
         gen, net_gen = torch.Generator(), torch.Generator()
-        rules = []
+        rules, laned_rules = [], []
         for k, prob in enumerate(tqdm(problems, desc=f"{name}: SD, ECAHD, net",
                                       disable=not progress, leave=False)):
             gen.manual_seed(problem_seed(settings.sample_seed, k))
@@ -302,10 +313,21 @@ def run_habits_benchmark(settings: HabitsBenchSettings, *, progress: bool = True
             safe = net.apply(np.asarray(plan.trajectory, dtype=np.float64),
                              segments=plan.segments, generator=net_gen)
             record((name, "ECAHD + net"), safe.path, ms + safe.time_ms)
-            if field is not None:
-                shaped((name, LANES), safe.path, ms + safe.time_ms)
             rules.append(safe.rule)
+            if laned is not None:
+                gen.manual_seed(problem_seed(settings.sample_seed, k))
+                net_gen.manual_seed(problem_seed(settings.sample_seed + 1, k))
+                t0 = time.perf_counter()
+                plan = laned[0].plan(prob.start, prob.goal, generator=gen)
+                ms = (time.perf_counter() - t0) * 1e3
+                safe = laned[1].apply(np.asarray(plan.trajectory, dtype=np.float64),
+                                      segments=plan.segments, generator=net_gen)
+                shaped((name, LANES), safe.path, ms + safe.time_ms)
+                laned_rules.append(safe.rule)
         fallbacks[name] = 100.0 * float(np.mean([r == "fallback" for r in rules]))
+        if laned_rules:
+            fallbacks[(name, LANES)] = 100.0 * float(np.mean([r == "fallback"
+                                                               for r in laned_rules]))
         log.info("%s: %d pairs planned in %.0f s", name, len(problems),
                  sum(times[(name, "SD")] + times[(name, "ECAHD + net")]) / 1e3)
 
@@ -329,7 +351,8 @@ def run_habits_benchmark(settings: HabitsBenchSettings, *, progress: bool = True
             collision_free=100 * float(free.mean()), success=100 * float(success.mean()),
             success_free=100 * float((free & success).mean()), length_ratio=float(ratio.mean()),
             time_ms_median=float(np.median(ms)), time_ms_p95=float(np.percentile(ms, 95)),
-            fallback=fallbacks[model] if planner in ("ECAHD + net", LANES) else None,
+            fallback=(fallbacks[model] if planner == "ECAHD + net"
+                      else fallbacks[key] if planner == LANES else None),
             shaped=(100 * float(np.mean([a for a, _ in shaping[key]]))
                     if key in shaping else None),
             shape_dropped=(100 * float(np.mean([b for _, b in shaping[key]]))

@@ -325,8 +325,8 @@ class HierarchicalPlanner(DenseStage):
         and goal fixed, so the waypoints where segments meet may move too."""
         times = {"sd": 0.0}
         t0 = time.perf_counter()
-        sparse = self.stage.step(S.numpy(), G.numpy(), generator=generator).sparse
-        waypoints = sparse.waypoints
+        step = self.stage.step(S.numpy(), G.numpy(), generator=generator)
+        sparse, waypoints = step.sparse, step.waypoints
         times["sd"] = (time.perf_counter() - t0) * 1e3
         wp = torch.as_tensor(waypoints, dtype=torch.float32)
         stages = self.local_stages(wp[:-1], wp[1:], end_fixed=torch.ones(len(wp) - 1,

@@ -56,6 +56,7 @@ class SegmentResult:
     safe: bool = True
     ms: float = 0.0
     polished: bool = False
+    shaped: bool = False  # moved onto the lanes learnt from demonstrations (ecahd_core.lanes)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -424,12 +425,16 @@ class SegmentRefiner:
         planner: a DenseStage (or a HierarchicalPlanner: its local stage).
         grid: the GridMap the exact checker judges on; footprint: the robot.
         generator: the DD sampler's torch.Generator (a seed reproduces the plans).
+        lanes: a LaneField (``ecahd lanes``) or None: a safe local plan is then moved sideways
+            onto where the robot was driven in its direction (``lanes.shape_path``: its ends
+            fixed, never into collision by the exact checker on the current grid).
     """
 
     def __init__(self, planner, grid, footprint, *, generator=None, exact: bool = True,
-                 retries: int = 8) -> None:
+                 retries: int = 8, lanes=None) -> None:
         self.planner, self.grid, self.footprint = planner, grid, footprint
         self.generator = generator
+        self.lanes = lanes
         self.retries = retries  # fresh DD samples when the refined plan still collides
         self.exact = exact  # False: every plan counts as safe (the paper's ablations)
 
@@ -489,9 +494,16 @@ class SegmentRefiner:
                     if self.judge(candidate):
                         plan, safe, c_after = candidate, True, float(costs[i])
                         break
+        shaped = False
+        if safe and self.exact and self.lanes is not None:
+            from ecahd_core.lanes import shape_path
+
+            moved = shape_path(plan, self.lanes, self.grid, self.footprint)
+            plan, shaped = (moved.path, True) if moved.shaped else (plan, False)
         return SegmentResult(plan=plan, c_before=stage.c_before, c_after=c_after,
                              stage="dd" if stage.dd_used else "j_check", safe=safe,
-                             ms=(time.perf_counter() - t0) * 1e3, polished=stage.polished)
+                             ms=(time.perf_counter() - t0) * 1e3, polished=stage.polished,
+                             shaped=shaped)
 
     @staticmethod
     def _exact_ends(plan, a: np.ndarray, b: np.ndarray) -> np.ndarray:

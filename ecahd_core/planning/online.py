@@ -357,13 +357,15 @@ class OnlinePlanner:
     def replan_spacing(self) -> float | None:
         return self.runner.config.replan_spacing
 
-    def set_map(self, grid, *, sd=None, astar=None, fd=None, learnt=None) -> None:
+    def set_map(self, grid, *, sd=None, astar=None, fd=None, learnt=None, lanes=None) -> None:
         """A new map with the planner of ``method`` built on it (``sd``: a SparseDiffusion
         without a placer; ``astar``: an AStarPlanner with the footprint's clearance; ``fd``: a
         FullDiffusion). Builds the placers and the subgoal rule's graph now, so no re-plan pays
         for them; an active goal is planned again. ``learnt``: the map of this site the models
         learnt when ``grid`` is an update of it: walls added since are treated as a scanned
-        blockage that never leaves (SD's plans crossing one are detoured by A*)."""
+        blockage that never leaves (SD's plans crossing one are detoured by A*). ``lanes``: a
+        LaneField of this map (``ecahd lanes``) or None: SD's waypoints are moved onto it
+        (``lanes.WaypointLanes``); EcahdError when it does not belong to ``grid``."""
         from ecahd_core.placement import auto_reach
         from ecahd_core.sensing import ObstacleMemory
 
@@ -383,6 +385,10 @@ class OnlinePlanner:
                                      settle=c.settle)
             if self.stage.subgoaling():
                 self.stage.subgoal_rule().field.graph  # the cost-to-go's graph, built now
+            if lanes is not None:
+                from ecahd_core.lanes import WaypointLanes
+
+                self.stage.lanes = WaypointLanes(lanes, grid, self.footprint)
         if self.runner.goal is not None:
             self.runner.set_goal(self.runner.goal)  # plan again on the new map
 

@@ -83,6 +83,9 @@ class SparseStage:
         self.subgoals = bool(subgoals)
         self.settle = bool(settle)
         self._subgoal_rule = None  # progress.SubgoalRule on the static placer's map, built once
+        # the lanes learnt from demonstrations (ecahd_core.lanes.WaypointLanes) or None: every
+        # plan's interior waypoints are moved onto them before they are followed
+        self.lanes = None
 
     # ------------------------------------------------------------------------------- gates
     @property
@@ -173,7 +176,7 @@ class SparseStage:
                 and self.subgoaling(sd)):  # beyond where Algorithm 1 would have reached G
             sparse = self.subgoal_rule().apply(sd, S, G, sparse, iteration,
                                                generator=generator, times=times)
-        wp = sparse.waypoints
+        wp = sparse.waypoints if self.lanes is None else self.lanes(sparse.waypoints)
         whole = len(wp) - 1
         if not self.every_waypoint or forced:
             return GlobalStep(sparse, wp, whole, forced=forced)
