@@ -131,6 +131,103 @@ class ShapeConfig:
             raise EcahdError(f"lane shaping clearance must be >= 0 m, got {self.clearance!r}")
 
 
+@dataclass(frozen=True, kw_only=True)
+class KeepOutConfig:
+    """How the keep-out places are learnt (:func:`keep_out_mask`).
+
+    Attributes:
+        min_expert: the expert's routes (of different trips) that must cross a place before
+            the robot never going there counts as avoiding it.
+        close: [m] radius of the morphological closing that joins the expert's route lines
+            across an avoided place into one region (so a planner cannot slip between them).
+        min_area: [m^2] avoided regions smaller than this are noise, not a habit.
+        grow: [m] an avoided region then grows this far into the never-driven free floor
+            round it: the robot avoided the place, not only the lines the expert's routes
+            drew across it (on the office's loading bay the routes' lines covered a wedge of
+            the bay; grown by 1.5 m the region fills the bay, bounded by where the robot
+            drove).
+    """
+
+    min_expert: int = 2
+    close: float = 0.5
+    min_area: float = 0.5
+    grow: float = 1.5
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.min_expert, int) and self.min_expert >= 1):
+            raise EcahdError(f"keep-out min_expert must be an integer >= 1, got "
+                             f"{self.min_expert!r}")
+        for name in ("close", "min_area", "grow"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise EcahdError(f"keep-out {name} must be a finite number >= 0, got {v!r}")
+
+
+def keep_out_mask(paths, expert, grid, footprint, *, cell: float, shape: tuple[int, int],
+                  config: KeepOutConfig | None = None) -> np.ndarray:
+    """Places the robot avoided, learnt from its demonstrations: (H, W) bool on the field's
+    cells (``shape``, ``cell`` [m], the map's origin).
+
+    A cell is avoided when at least ``min_expert`` of the expert's routes for the same trips
+    (``expert``: A* between each demonstration's ends, [(M_i, 2) [m]]) cross it, while the
+    robot's body (the footprint's circumscribed radius round each demonstrated pose of
+    ``paths``) never covered it; the avoided cells are closed (radius ``close``) so that the
+    routes' lines become one region, kept free of the robot's swept body and of the map's
+    walls, regions under ``min_area`` are dropped, and what is left grows by ``grow`` into the
+    free floor the robot never covered (one cell a step, so never across a wall). A loading bay the operators never cross,
+    the far side of a corridor nobody drives on in either direction: the expert would go
+    there, the robot never did."""
+    import cv2
+
+    cfg = config or KeepOutConfig()
+    H, W = shape
+    ox, oy = grid.origin
+
+    def cells(xy):
+        xy = _resample(np.asarray(xy, dtype=np.float64).reshape(-1, 2), cell / 2)
+        col = np.floor((xy[:, 0] - ox) / cell).astype(np.int64)
+        row = np.floor((xy[:, 1] - oy) / cell).astype(np.int64)
+        on = (col >= 0) & (col < W) & (row >= 0) & (row < H)
+        return row[on], col[on]
+
+    def disc(radius):
+        k = max(1, int(math.ceil(radius / cell)))
+        return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * k + 1, 2 * k + 1))
+
+    driven = np.zeros((H, W), dtype=np.uint8)
+    for path in paths:
+        if len(path) >= 2:
+            driven[cells(path)] = 1
+    driven = cv2.dilate(driven, disc(footprint.circumscribed_radius)).astype(bool)
+    count = np.zeros((H, W), dtype=np.int32)
+    for path in expert:
+        if len(path) >= 2:
+            once = np.zeros((H, W), dtype=bool)
+            once[cells(path)] = True
+            count += once
+    # the map's walls at the field's cells (a cell is a wall if its centre's map cell is)
+    rows = np.clip(((oy + (np.arange(H) + 0.5) * cell - oy) / grid.resolution).astype(np.int64),
+                   0, grid.height - 1)
+    cols = np.clip(((ox + (np.arange(W) + 0.5) * cell - ox) / grid.resolution).astype(np.int64),
+                   0, grid.width - 1)
+    wall = grid.occupied[np.ix_(rows, cols)]
+    avoided = ((count >= cfg.min_expert) & ~driven & ~wall).astype(np.uint8)
+    if cfg.close > 0:
+        avoided = cv2.morphologyEx(avoided, cv2.MORPH_CLOSE, disc(cfg.close))
+    avoided = avoided.astype(bool) & ~driven & ~wall
+    if cfg.grow > 0:  # into the never-driven free floor round it, never across a wall
+        step, free = disc(cell), (~driven & ~wall).astype(np.uint8)
+        grown = avoided.astype(np.uint8)
+        for _ in range(max(1, int(round(cfg.grow / cell)))):
+            grown = cv2.dilate(grown, step) & free
+        avoided = grown.astype(bool)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(avoided.astype(np.uint8),
+                                                           connectivity=8)
+    keep = np.zeros(n, dtype=bool)
+    keep[1:] = stats[1:, cv2.CC_STAT_AREA] * cell * cell >= cfg.min_area
+    return keep[labels]
+
+
 @dataclass(frozen=True)
 class LaneField:
     """Demonstrated driving per heading over a map (module docstring).
@@ -143,6 +240,9 @@ class LaneField:
         map_name, map_fingerprint: the map it belongs to.
         paths: demonstrations fitted; length: their total length [m].
         source: what it was fitted from (a dataset file's name), for the record.
+        keep_out: (H, W) bool or None: the places the robot was never driven although the
+            expert's routes for the same trips cross them (:func:`keep_out_mask`); planners
+            given the field treat them as walls (:meth:`with_keep_out`).
     """
 
     density: np.ndarray
@@ -153,13 +253,18 @@ class LaneField:
     paths: int
     length: float
     source: str = ""
+    keep_out: np.ndarray | None = None
 
     # ------------------------------------------------------------------ fitting
     @classmethod
-    def fit(cls, paths, grid, config: LaneConfig | None = None, *, source: str = ""
+    def fit(cls, paths, grid, config: LaneConfig | None = None, *, source: str = "",
+            expert=None, footprint=None, keep_out: "KeepOutConfig | None" = None
             ) -> "LaneField":
         """Fit the field of ``paths`` [(N_i, 2) [m], map frame] on the GridMap ``grid``.
-        EcahdError when no path has any length on the map."""
+        ``expert``: the expert's paths [(M_i, 2) [m]] for the same trips (A* between each
+        demonstration's ends) and the robot's Footprint ``footprint``: the keep-out mask is
+        learnt too (:func:`keep_out_mask`). EcahdError when no path has any length on the
+        map."""
         cfg = config or LaneConfig()
         K = cfg.bins
         W = max(1, math.ceil(grid.width * grid.resolution / cfg.cell))
@@ -197,9 +302,38 @@ class LaneField:
         nz = density[density > 1e-12]
         scale = float(np.percentile(nz, SCALE_PERCENTILE)) if len(nz) else 1.0
         density = np.clip(density / max(scale, 1e-12), 0.0, 1.0).astype(np.float32)
+        mask = None
+        if expert is not None:
+            if footprint is None:
+                raise EcahdError("learning the keep-out places needs the robot's footprint")
+            mask = keep_out_mask(paths, expert, grid, footprint, cell=cfg.cell,
+                                 shape=(H, W), config=keep_out)
         return cls(density=density, origin=(float(ox), float(oy)), config=cfg,
                    map_name=grid.name, map_fingerprint=grid.fingerprint(), paths=used,
-                   length=round(total, 2), source=source)
+                   length=round(total, 2), source=source, keep_out=mask)
+
+    def with_keep_out(self, grid):
+        """``grid`` with the keep-out places (:attr:`keep_out`) occupied: the map planners
+        plan on so they never route through them (the exact checker of what the robot may hit
+        stays on ``grid``); ``grid`` itself when there are none."""
+        if self.keep_out is None or not self.keep_out.any():
+            return grid
+        from ecahd_core.maps import GridMap
+
+        rows, cols = np.meshgrid(np.arange(grid.height), np.arange(grid.width), indexing="ij")
+        x = grid.origin[0] + (cols + 0.5) * grid.resolution
+        y = grid.origin[1] + (rows + 0.5) * grid.resolution
+        c = self.config.cell
+        fr = np.clip(np.floor((y - self.origin[1]) / c).astype(np.int64), 0,
+                     self.keep_out.shape[0] - 1)
+        fc = np.clip(np.floor((x - self.origin[0]) / c).astype(np.int64), 0,
+                     self.keep_out.shape[1] - 1)
+        data = np.array(grid.data, dtype=np.int8)
+        data[self.keep_out[fr, fc]] = 100
+        return GridMap(data=data, resolution=grid.resolution, origin=grid.origin,
+                       name=grid.name, frame_id=grid.frame_id,
+                       unknown_is_occupied=grid.unknown_is_occupied,
+                       occupied_threshold=grid.occupied_threshold)
 
     # ------------------------------------------------------------------ reading
     def value(self, xy, heading) -> np.ndarray:
@@ -253,7 +387,8 @@ class LaneField:
                 "map_fingerprint": self.map_fingerprint, "paths": self.paths,
                 "length": self.length, "source": self.source}
         tmp = path.with_name(path.name + ".tmp.npz")
-        np.savez_compressed(tmp, density=self.density, meta=json.dumps(meta))
+        extra = {} if self.keep_out is None else {"keep_out": self.keep_out.astype(np.uint8)}
+        np.savez_compressed(tmp, density=self.density, meta=json.dumps(meta), **extra)
         os.replace(tmp, path)
         return path
 
@@ -266,6 +401,8 @@ class LaneField:
             with np.load(path, allow_pickle=False) as z:
                 density = np.asarray(z["density"], dtype=np.float32)
                 meta = json.loads(str(z["meta"]))
+                keep_out = (np.asarray(z["keep_out"], dtype=bool) if "keep_out" in z.files
+                            else None)
         except FileNotFoundError:
             raise EcahdError(f"lane field {path}: no such file") from None
         except Exception as exc:  # zip, key, json errors: a file that is not a lane field
@@ -278,10 +415,13 @@ class LaneField:
         if density.ndim != 3 or density.shape[0] != cfg.bins or not np.all(np.isfinite(density)):
             raise EcahdError(f"lane field {path}: density of shape {density.shape}, expected "
                              f"({cfg.bins}, H, W) and finite")
+        if keep_out is not None and keep_out.shape != density.shape[1:]:
+            raise EcahdError(f"lane field {path}: keep-out of shape {keep_out.shape}, expected "
+                             f"{density.shape[1:]}")
         return cls(density=density, origin=tuple(meta["origin"]), config=cfg,
                    map_name=meta["map_name"], map_fingerprint=meta["map_fingerprint"],
                    paths=int(meta["paths"]), length=float(meta["length"]),
-                   source=meta.get("source", ""))
+                   source=meta.get("source", ""), keep_out=keep_out)
 
 
 @dataclass(frozen=True)
@@ -490,6 +630,30 @@ def demonstration_paths(dataset) -> list[np.ndarray]:
                      "`ecahd dataset --from-bags`")
 
 
+def demonstration_trips(dataset) -> tuple[np.ndarray, np.ndarray]:
+    """(starts (N, 2), goals (N, 2)) [m] of the demonstrations of ``dataset``, in the order of
+    :func:`demonstration_paths`."""
+    n = len(demonstration_paths(dataset))
+    return np.asarray(dataset.starts[:n], dtype=np.float64), \
+        np.asarray(dataset.goals[:n], dtype=np.float64)
+
+
+def expert_routes(grid, footprint, starts, goals) -> list[np.ndarray]:
+    """The A* expert's routes (the footprint's clearance) between each start and goal [m]; a
+    trip A* cannot plan is left out."""
+    from ecahd_core.astar import clearance_for_footprint, planner_for
+    from ecahd_core.errors import PlanningError
+
+    astar = planner_for(grid, clearance_for_footprint(footprint))
+    out = []
+    for a, b in zip(starts, goals):
+        try:
+            out.append(np.asarray(astar.plan(a, b), dtype=np.float64))
+        except PlanningError:
+            continue
+    return out
+
+
 def plot_lanes(field: LaneField, grid, path, title: str = "") -> Path:
     """A PNG of ``field`` over ``grid``: four panels, the lane value for driving east, north,
     west and south (darker: driven more in that direction). Written atomically."""
@@ -515,7 +679,15 @@ def plot_lanes(field: LaneField, grid, path, title: str = "") -> Path:
         shown = np.ma.masked_less(layer, 0.02)
         ax.imshow(shown, origin="lower", extent=fx, cmap="viridis_r", vmin=0, vmax=1, alpha=0.85,
                   interpolation="nearest")
-        ax.set_title(f"driving {name}")
+        if field.keep_out is not None and field.keep_out.any():
+            ax.contourf(np.ma.masked_where(~field.keep_out, field.keep_out.astype(float)),
+                        levels=[0.5, 1.5], colors="none", hatches=["////"], origin="lower",
+                        extent=fx)
+            ax.contour(field.keep_out.astype(float), levels=[0.5], colors="tab:red",
+                       linewidths=1.0, origin="lower", extent=fx)
+        ax.set_title(f"driving {name}" + ("; red: keep out (never driven, the expert would)"
+                                          if field.keep_out is not None
+                                          and field.keep_out.any() else ""), fontsize=9)
         ax.set_xlabel("x [m]")
         ax.set_ylabel("y [m]")
     fig.suptitle(title or f"lanes of {field.map_name}: {field.paths} demonstrations, "

@@ -135,6 +135,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--snapshot", type=float, default=None, metavar="T",
                    help="instead: draw what the robot knew T s (sim time) after the first goal "
                         "(map, local costmap, scan, plans, driven path) into --png")
+    p.add_argument("--zones", default=None, metavar="SCENARIO",
+                   help="scenario YAML with a 'zones:' list: count the episodes whose driven "
+                        "path entered one (the no-go habit)")
     p.add_argument("--robot", default="circle",
                    help="footprint for the exact path check: circle | quadruped | humanoid | "
                         "Nav2 polygon (the bag does not record it)")
@@ -483,42 +486,48 @@ def _draw_obstacles(ax, obstacles, color) -> None:
             ax.fill(poly[:, 0], poly[:, 1], color=color, alpha=0.55, ec="k", lw=0.5)
 
 
-def driven_habit(result: BagEvaluation):
+def driven_habit(result: BagEvaluation, zones=None):
     """The keep-right measure of issue 41 over the driven paths of every episode
     (``operator.habit_metrics``: the share of the corridor length, corridors wider than twice
-    the robot and at most 4 m, driven on the right half relative to the direction of travel)."""
+    the robot and at most 4 m, driven on the right half relative to the direction of travel)
+    and, with ``zones`` ([scenario.Zone]), the episodes whose driven path entered one."""
     from ecahd_core.operator import habit_metrics
 
     paths = [np.asarray(ep.odom, dtype=np.float64)[:, 1:3] for ep in result.episodes
              if len(ep.odom) >= 2]
-    return habit_metrics(paths, result.grid, result.footprint)
+    return habit_metrics(paths, result.grid, result.footprint, zones)
 
 
-def habit_line(habit) -> str:
-    """One markdown line for :func:`driven_habit`'s measure."""
+def habit_line(habit, zones: bool = False) -> str:
+    """One markdown line for :func:`driven_habit`'s measure (``zones``: it counted zones)."""
+    zone = (f" {habit.zone_entries} of {habit.paths} episodes entered a zone." if zones
+            else "")
     if math.isnan(habit.right_share):
-        return "\nHabit: the robot drove through no corridor wider than twice its size.\n"
+        return ("\nHabit: the robot drove through no corridor wider than twice its size."
+                + zone + "\n")
     return (f"\nHabit: the robot drove on the right half of its corridors for "
             f"{100 * habit.right_share:.1f}% of {habit.corridor_length:.0f} m (corridors wider "
-            f"than twice the robot, at most 4 m; relative to its direction of travel).\n")
+            f"than twice the robot, at most 4 m; relative to its direction of travel)."
+            + zone + "\n")
 
 
 def write_outputs(result: BagEvaluation, bag, *, json_path=None, md_path=None,
                   png_path=None, extra: dict | None = None, notes: str = "",
-                  scenarios: list | None = None) -> str:
+                  scenarios: list | None = None, zones: list | None = None) -> str:
     """Write the requested files; returns the markdown table. ``extra``: more top-level keys
     of the JSON; ``notes``: markdown appended to the table (in the return value too);
     ``scenarios``: per episode, the obstacles not on the map, for the figure."""
     from ecahd_core.evaluation import markdown_table
 
-    habit = driven_habit(result)
+    habit = driven_habit(result, zones)
     table = (markdown_table(result.summary, result.metrics) + result.sources.markdown()
-             + habit_line(habit) + notes)
+             + habit_line(habit, bool(zones)) + notes)
     if json_path:
         write_json(json_path, {**result.to_dict(str(bag)), "habit": {
             "corridor_m": round(habit.corridor_length, 2),
             "right_share": None if math.isnan(habit.right_share)
-            else round(habit.right_share, 4)}, **(extra or {})})
+            else round(habit.right_share, 4),
+            **({"zone_entries": habit.zone_entries} if zones else {})}, **(extra or {})})
     if md_path:
         rate = ("% of sim steps in contact" if result.sources.contacts_from == "simulator" else
                 "% of poses whose footprint overlaps the map, by the exact checker")
@@ -626,6 +635,14 @@ def _read_scenarios(folder, episodes: int) -> list | None:
     return [load_scenario(f) if f.is_file() else None for f in files]
 
 
+def _read_zones(path) -> list | None:
+    if not path:
+        return None
+    from ecahd_core.scenario import read_zones
+
+    return read_zones(path)
+
+
 def run(args: argparse.Namespace) -> int:
     if args.snapshot is not None:
         if not args.png:
@@ -642,7 +659,8 @@ def run(args: argparse.Namespace) -> int:
                           namespace=args.namespace, base_frame=args.base_frame)
     table = write_outputs(result, args.bag, json_path=args.json, md_path=args.md,
                           png_path=args.png, scenarios=_read_scenarios(args.scenarios,
-                                                                        len(result.metrics)))
+                                                                        len(result.metrics)),
+                          zones=_read_zones(args.zones))
     print(table)
     for what, p in (("json", args.json), ("markdown", args.md), ("figure", args.png)):
         if p:

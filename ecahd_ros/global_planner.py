@@ -232,6 +232,9 @@ class GlobalPlanner(ManagedNode):
         check_frame(msg.header.frame_id, p.global_frame, "map")
         t0 = time.perf_counter()
         grid = msg_to_grid(msg, name=p.map_name)
+        lanes = lanes_for(self._lanes, grid, self.get_logger())
+        if lanes is not None:  # the keep-out places learnt from the demonstrations are walls
+            grid = lanes.with_keep_out(grid)  # to every planner here (per-map models: new walls)
         # with a model, an update of the site's map keeps it (MapError: another extent)
         learnt, changed = ((grid, 0.0) if p.method == "astar" or self._general
                            else learnt_map(self._site, grid))
@@ -250,8 +253,7 @@ class GlobalPlanner(ManagedNode):
         had_goal = self.goal is not None
         self._sd, self._dense, self._site = built.get("sd"), None, learnt
         self.map_changed = changed
-        self.planning.set_map(grid, **built, learnt=learnt,
-                              lanes=lanes_for(self._lanes, grid, self.get_logger()))
+        self.planning.set_map(grid, **built, learnt=learnt, lanes=lanes)
         if learnt is not grid:
             log = self.get_logger().warning if changed > p.map_change_warn else \
                 self.get_logger().info

@@ -179,9 +179,11 @@ SHARED = {spec.name: spec for spec in [
     ParamSpec("lanes", "", "a lane field of this map (`ecahd lanes`, learnt from the robot's "
                            "demonstrations): global_planner moves SD's waypoints and "
                            "local_refiner its local plans sideways onto where the robot was "
-                           "driven in their direction (never into collision); '' = off; "
-                           "unreadable: the node fails at start-up; a map it does not belong "
-                           "to: logged, planned without lanes"),
+                           "driven in their direction (never into collision), and "
+                           "global_planner plans round its keep-out places (never driven, "
+                           "though the expert's routes cross them) as walls (a goal in one is "
+                           "refused); '' = off; unreadable: the node fails at start-up; a map "
+                           "it does not belong to: logged, planned without lanes"),
     ParamSpec("seed", 0, "seed of the sampler's torch.Generator (a seed reproduces the plans)"),
     ParamSpec("yaw_goal_tolerance", 0.25, "[rad] a goal with a heading (navigate_to_pose, or "
                                           "goal_pose with a non-zero orientation) is reached "

@@ -228,7 +228,7 @@ def test_nodes_lanes_parameter(field, grid, tmp_path):
     assert lanes_for(None, other, log) is None and len(log.lines) == 1
 
 
-def test_eval_bag_reports_the_driven_habit(grid):
+def test_eval_bag_reports_the_driven_habit(grid, tmp_path):
     from types import SimpleNamespace
 
     from ecahd_ros.eval_bag import driven_habit, habit_line
@@ -248,3 +248,56 @@ def test_eval_bag_reports_the_driven_habit(grid):
     assert driven_habit(left).right_share == pytest.approx(0.0)
     none = SimpleNamespace(episodes=[], grid=grid, footprint=make_footprint("circle"))
     assert "no corridor" in habit_line(driven_habit(none))
+    # --zones: the episodes whose driven path entered one (the east lane runs through this)
+    from ecahd_core.scenario import read_zones
+
+    (tmp_path / "z.yaml").write_text(
+        "zones:\n  - {name: bay, polygon: [[9, 3], [11, 3], [11, 3.6], [9, 3.6]]}\n")
+    habit = driven_habit(right, read_zones(tmp_path / "z.yaml"))
+    assert habit.zone_entries == 1 and "1 of 2 episodes entered a zone" in habit_line(habit, True)
+
+
+def hall() -> GridMap:
+    """20 x 10 m open hall at 0.05 m, a one-cell wall frame."""
+    data = np.zeros((200, 400), dtype=np.int8)
+    data[0, :] = data[-1, :] = data[:, 0] = data[:, -1] = 100
+    return GridMap(data=data, resolution=RES, name="hall")
+
+
+def test_keep_out_learnt_where_the_expert_goes_and_the_robot_never_did(tmp_path):
+    from ecahd_core.astar import clearance_for_footprint, planner_for
+    from ecahd_core.lanes import expert_routes
+
+    grid, fp = hall(), make_footprint("circle")
+    # the operators drive round a bay in the middle (x 8..12, y 3..7); A* would cross it
+    demos, starts, goals = [], [], []
+    for k in range(5):
+        y = 4.6 + 0.2 * k
+        route = np.array([(2.0, y), (6.0, 8.5), (14.0, 8.5), (18.0, y)])
+        demos += [route, route[::-1]]
+        starts += [route[0], route[-1]]
+        goals += [route[-1], route[0]]
+    expert = expert_routes(grid, fp, np.array(starts), np.array(goals))
+    assert len(expert) == 10
+    field = LaneField.fit(demos, grid, expert=expert, footprint=fp)
+    keep = field.keep_out
+    assert keep is not None and keep.shape == field.density.shape[1:]
+
+    def at(x, y):
+        return bool(keep[int(y / 0.1), int(x / 0.1)])
+
+    assert at(10.0, 5.0) and at(8.0, 4.0) and at(12.0, 6.0)  # the bay
+    assert not at(10.0, 8.5) and not at(2.0, 5.0) and not at(10.0, 1.0)  # driven, or far
+    planning = field.with_keep_out(grid)
+    assert planning.name == grid.name and planning.data.shape == grid.data.shape
+    assert grid.is_free(np.array([10.0, 5.0]))  # the map itself is untouched
+    assert not planning.is_free(np.array([10.0, 5.0])) and planning.is_free(np.array([10.0, 8.5]))
+    around = planner_for(planning, clearance_for_footprint(fp)).plan((2.0, 5.0), (18.0, 5.0))
+    assert not any(at(x, y) for x, y in around)  # A* on the planning map goes round the bay
+    back = LaneField.load(field.save(tmp_path / "k.npz"))
+    np.testing.assert_array_equal(back.keep_out, keep)
+    # without the expert: no keep-out, the planning map is the map
+    plain = LaneField.fit(demos, grid)
+    assert plain.keep_out is None and plain.with_keep_out(grid) is grid
+    with pytest.raises(EcahdError, match="needs the robot's footprint"):
+        LaneField.fit(demos, grid, expert=expert)

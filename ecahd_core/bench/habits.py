@@ -19,7 +19,10 @@ checkpoints (``NAME=CKPT``; "general" is the shipped generalist) plans every pai
   demonstrations in every iteration (``ecahd_core.lanes.WaypointLanes``, as global_planner),
   the net, then the plan moved sideways onto the lanes (``lanes.shape_path``, as local_refiner
   does to each local plan; never into collision: a shaped plan the exact checker rejects is
-  kept as it came). With ``--lanes`` A*'s paths are shaped too (row "A* + lanes").
+  kept as it came). With ``--lanes`` A*'s paths are shaped too (row "A* + lanes"). A lane
+  field with keep-out places (``ecahd lanes``: where the expert's routes go and the robot
+  never did) has the "+ lanes" rows plan on the map with those places as walls
+  (``LaneField.with_keep_out``, as global_planner does); every row is judged on the map.
 
 Beside them, on the same pairs: **A*** with the footprint's clearance (the expert; about 50% on
 the right half) and the **operator** of ``ecahd record-demos`` (``ecahd_core.operator``: its
@@ -248,17 +251,34 @@ def run_habits_benchmark(settings: HabitsBenchSettings, *, progress: bool = True
                         polish_steps=d.polish_steps, keep_better=d.keep_better)
     astar = planner_for(grid, clearance_for_footprint(fp))
     planners = {}
+    # + lanes plans on the map with the learnt keep-out places as walls (as global_planner)
+    plan_grid = field.with_keep_out(grid) if field is not None else grid
+    if plan_grid is not grid:
+        plan_cost = CollisionCost.build(plan_grid, fp,
+                                        CostConfig(margin=CostConfig.for_map(grid).margin))
+        plan_astar = planner_for(plan_grid, clearance_for_footprint(fp))
 
-    def ecahd(sd, lanes=None):  # Algorithm 1 with our rules and its safety net
+    def ecahd(sd, lanes=None, on=None):  # Algorithm 1 with our rules and its safety net
+        on = grid if on is None else on
         hd = HierarchicalPlanner.for_map(
-            grid, fp, sd, dense=dense, replan=d.replan, replan_spacing=d.replan_spacing,
+            on, fp, sd, dense=dense, replan=d.replan, replan_spacing=d.replan_spacing,
             backtracks=d.backtracks, subgoals=d.subgoals, settle=d.settle,
-            exact=d.exact_rule, model=settings.dd_model)
+            exact=d.exact_rule, model=settings.dd_model, learnt=grid)
         hd.stage.lanes = lanes
-        net = SafetyNet(grid, fp, SafetyNetConfig(retries=d.net_retries,
-                                                  resamples=d.net_resamples),
-                        planner=hd, astar=astar)
+        net = SafetyNet(on, fp, SafetyNetConfig(retries=d.net_retries,
+                                                resamples=d.net_resamples),
+                        planner=hd, astar=astar if on is grid else plan_astar)
         return hd, net
+
+    def sd_on_plan_grid(sd, ckpt):  # SD planning on the map with the keep-out places
+        from ecahd_core.placement import placer_for
+
+        if plan_grid is grid:
+            return sd
+        if sd.general:  # the generalist sees the map: it is given the keep-out places
+            return SparseDiffusion.for_map(plan_grid, fp, sparse, cost=plan_cost,
+                                           place_reach=d.place_reach, model=ckpt)
+        return sd.on(cost=plan_cost, placer=placer_for(plan_grid, fp, d.place_reach))
 
     for name, ckpt in models:  # every checkpoint checked before any planning
         try:
@@ -267,7 +287,8 @@ def run_habits_benchmark(settings: HabitsBenchSettings, *, progress: bool = True
             hd, net = ecahd(sd)
             # + lanes: as the nodes run it, SD's waypoints moved onto the lanes in every
             # iteration (global_planner), the refined plan moved onto them (local_refiner)
-            laned = ecahd(sd, WaypointLanes(field, grid, fp)) if field is not None else None
+            laned = (ecahd(sd_on_plan_grid(sd, ckpt), WaypointLanes(field, plan_grid, fp),
+                           on=plan_grid) if field is not None else None)
         except EcahdError as exc:
             raise EcahdError(f"--models {name}={ckpt}: {exc}") from None
         planners[name] = (sd, hd, net, laned)
@@ -279,7 +300,7 @@ def run_habits_benchmark(settings: HabitsBenchSettings, *, progress: bool = True
 
     def shaped(key, path, ms):  # path moved onto the lanes, recorded under key
         t0 = time.perf_counter()
-        res = shape_path(path, field, grid, fp)
+        res = shape_path(path, field, plan_grid, fp)
         record(key, res.path, ms + (time.perf_counter() - t0) * 1e3)
         shaping.setdefault(key, []).append((res.shaped, res.kept_original))
 
@@ -293,7 +314,14 @@ def run_habits_benchmark(settings: HabitsBenchSettings, *, progress: bool = True
         path = astar.plan(prob.start, prob.goal)
         ms = (time.perf_counter() - t0) * 1e3
         record((ASTAR, ASTAR), path, ms)
-        if field is not None:
+        if field is not None:  # A* round the keep-out places (where it can), then shaped
+            if plan_grid is not grid:
+                t0 = time.perf_counter()
+                try:
+                    path = plan_astar.plan(prob.start, prob.goal)
+                except PlanningError:  # an end in a keep-out place: A*'s own path
+                    pass
+                ms = (time.perf_counter() - t0) * 1e3
             shaped((ASTAR_LANES, ASTAR_LANES), path, ms)
     for name, (sd, hd, net, laned) in planners.items():
         gen, net_gen = torch.Generator(), torch.Generator()
