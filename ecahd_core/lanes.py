@@ -446,7 +446,7 @@ def shape_path(path, field: LaneField, grid, footprint, config: ShapeConfig | No
     """Move the plan ``path`` (N, 2) [m] sideways onto ``field``'s lanes on ``grid`` for the
     Footprint ``footprint`` (module docstring, "Shaping a plan"). The start and the goal never
     move; a plan that shaping would put in collision is returned unchanged."""
-    from ecahd_core.collision import check_collision, wall_distance
+    from ecahd_core.collision import check_collision
 
     cfg = config or ShapeConfig()
     original = np.asarray(path, dtype=np.float64).reshape(-1, 2)
@@ -457,16 +457,8 @@ def shape_path(path, field: LaneField, grid, footprint, config: ShapeConfig | No
         return unchanged
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))])
     normal, heading = _normals(xy, arc, cfg.tangent_window)
-    offsets = np.arange(-round(cfg.reach / cfg.step), round(cfg.reach / cfg.step) + 1) * cfg.step
-    S, zero = len(offsets), len(offsets) // 2
-    cand = xy[:, None, :] + offsets[None, :, None] * normal[:, None, :]  # (n, S, 2)
-    clearance = (footprint.circumscribed_radius + cfg.margin if cfg.clearance is None
-                 else cfg.clearance)
-    free = wall_distance(grid, cand.reshape(-1, 2)).reshape(n, S) >= clearance
-    # reachable: free all the way out from the path (offset 0) to the offset; never over a wall
-    reach = np.zeros_like(free)
-    reach[:, zero:] = np.cumprod(free[:, zero:], axis=1).astype(bool)
-    reach[:, :zero + 1] |= np.cumprod(free[:, zero::-1], axis=1).astype(bool)[:, ::-1]
+    offsets, cand, reach = _sideways(xy, normal, grid, footprint, cfg)
+    S = len(offsets)
     val = field.value(cand, heading[:, None])  # (n, S)
     val = np.where(reach, val, -1.0)
     best = np.argmax(val, axis=1)
@@ -514,7 +506,7 @@ class WaypointLanes:
 
     def __call__(self, waypoints) -> np.ndarray:
         """(P, 2) [m] -> (P, 2) [m], a new array."""
-        from ecahd_core.collision import check_collision, wall_distance
+        from ecahd_core.collision import check_collision
 
         cfg = self.config
         wp = np.array(waypoints, dtype=np.float64).reshape(-1, 2)
@@ -522,11 +514,6 @@ class WaypointLanes:
             return wp
         chord = wp[2:] - wp[:-2]
         norm = np.linalg.norm(chord, axis=1)
-        offsets = np.arange(-round(cfg.reach / cfg.step), round(cfg.reach / cfg.step) + 1) \
-            * cfg.step
-        zero = len(offsets) // 2
-        clearance = (self.footprint.circumscribed_radius + cfg.margin if cfg.clearance is None
-                     else cfg.clearance)
 
         def leg_free(a, b) -> bool:
             return check_collision(np.stack([a, b]), self.footprint, self.grid).collision_free
@@ -535,17 +522,13 @@ class WaypointLanes:
             if norm[i - 1] < 1e-6:
                 continue
             t = chord[i - 1] / norm[i - 1]
-            n = np.array([-t[1], t[0]])
-            cand = wp[i] + offsets[:, None] * n  # (S, 2)
-            free = wall_distance(self.grid, cand) >= clearance
-            reach = np.zeros_like(free)
-            reach[zero:] = np.cumprod(free[zero:]).astype(bool)
-            reach[:zero + 1] |= np.cumprod(free[zero::-1]).astype(bool)[::-1]
-            val = np.where(reach, self.field.value(cand, math.atan2(t[1], t[0])), -1.0)
+            offsets, cand, reach = _sideways(wp[i:i + 1], np.array([[-t[1], t[0]]]), self.grid,
+                                             self.footprint, cfg)
+            val = np.where(reach[0], self.field.value(cand[0], math.atan2(t[1], t[0])), -1.0)
             best = int(np.argmax(val))
-            if val[best] < cfg.min_value or best == zero:
+            if val[best] < cfg.min_value or offsets[best] == 0.0:
                 continue
-            moved = cand[best]
+            moved = cand[0, best]
             before = (leg_free(wp[i - 1], wp[i]), leg_free(wp[i], wp[i + 1]))
             after = (leg_free(wp[i - 1], moved), leg_free(moved, wp[i + 1]))
             if (before[0] and not after[0]) or (before[1] and not after[1]):
@@ -557,6 +540,27 @@ class WaypointLanes:
 
 
 # ---------------------------------------------------------------------- helpers
+def _sideways(xy: np.ndarray, normal: np.ndarray, grid, footprint, cfg: ShapeConfig
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The offsets searched across points xy (n, 2) along their unit normals (n, 2): (offsets
+    (S,) [m], the candidate points (n, S, 2), reach (n, S) bool: free all the way out from the
+    point (offset 0) to the offset by the footprint's clearance, so never over a wall)."""
+    from ecahd_core.collision import wall_distance
+
+    k = round(cfg.reach / cfg.step)
+    offsets = np.arange(-k, k + 1) * cfg.step
+    cand = xy[:, None, :] + offsets[None, :, None] * normal[:, None, :]
+    clearance = (footprint.circumscribed_radius + cfg.margin if cfg.clearance is None
+                 else cfg.clearance)
+    n, S = len(xy), len(offsets)
+    free = wall_distance(grid, cand.reshape(-1, 2)).reshape(n, S) >= clearance
+    reach = np.zeros_like(free)
+    reach[:, k:] = np.cumprod(free[:, k:], axis=1).astype(bool)
+    reach[:, :k + 1] |= np.cumprod(free[:, k::-1], axis=1).astype(bool)[:, ::-1]
+    return offsets, cand, reach
+
+
+
 def _bin_weights(angle: np.ndarray, K: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Headings (N,) [rad] -> (k0, k1, f): the two nearest of K bins and the weight of k1."""
     b = np.mod(np.asarray(angle, dtype=np.float64), 2 * math.pi) / (2 * math.pi / K)
