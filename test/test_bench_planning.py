@@ -158,3 +158,23 @@ def test_bench_general_rows_per_family_and_robot():
     assert row["net"] == 100 * np.mean(cell["net_free_by_problem"])
     assert len(cell["length_ratio_by_problem"]) == 2 and row["length_median"] > 0.9
     assert "| maze2d-large | circle | 1 | 2 |" in format_table(result)
+
+
+def test_bench_general_sd_steps_reach_the_sampler(monkeypatch):
+    """``--sd-steps N``: SD samples with N DDIM steps (the table says so)."""
+    from ecahd_core.bench.general import GeneralBenchSettings, format_table, run_general_benchmark
+    from ecahd_core.planning import sparse
+
+    seen = []
+    original = sparse.SparseDiffusion.__init__
+
+    def spy(self, checkpoint, config=None, **kwargs):
+        seen.append(config.num_steps)
+        original(self, checkpoint, config, **kwargs)
+
+    monkeypatch.setattr(sparse.SparseDiffusion, "__init__", spy)
+    result = run_general_benchmark(GeneralBenchSettings(
+        maps=("maze2d-large",), problems=1, robots=("circle",), sd_model=None, dd_model=None,
+        sd_steps=4), progress=False)
+    assert seen and set(seen) == {4}
+    assert "SD 4 DDIM steps" in format_table(result)

@@ -52,6 +52,7 @@ class GeneralBenchSettings:
     sd_model: str | None = "general"
     dd_model: str | None = "general"
     off: tuple[str, ...] = ()  # rules switched off (RULES_OFF)
+    sd_steps: int | None = None  # SD's DDIM steps (None: the model's; the generalist's: 10)
 
 
 @dataclass
@@ -92,7 +93,8 @@ def run_general_benchmark(settings: GeneralBenchSettings, *, progress: bool = Tr
             map=spec, problems=settings.problems, seed=settings.seed,
             sample_seed=settings.sample_seed, per_problem_seeds=True,
             robots=tuple(settings.robots), methods=("hd",), guidance="on", ablation=False,
-            sd_model=settings.sd_model, dd_model=settings.dd_model, **overrides),
+            sd_model=settings.sd_model, dd_model=settings.dd_model,
+            sd_steps=settings.sd_steps, **overrides),
             progress=progress)
         for cell in r.cells:
             result.cells.append({"map": spec, "family": family_of(spec), **cell.to_dict()})
@@ -134,7 +136,8 @@ def format_table(result: GeneralBenchResult) -> str:
     lines = [f"ECAHD with SD {s.sd_model or 'per map'} and DD {s.dd_model or 'per map'} on "
              f"{len(s.maps)} maps, {s.problems} problems each (seed {s.seed}, sampling seed "
              f"{s.sample_seed} per problem), rules off: {', '.join(s.off) or 'none'}, "
-             f"{result.seconds / 60:.1f} min", "",
+             + (f"SD {s.sd_steps} DDIM steps, " if s.sd_steps else "")
+             + f"{result.seconds / 60:.1f} min", "",
              "| family | robot | maps | problems | ECAHD alone % | with the net % | A* fallback "
              "% | unsafe % | median ms | p95 ms | length / A* median | p99 |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -163,6 +166,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="DD: 'general', a file, or 'map' (each map's own)")
     parser.add_argument("--off", nargs="+", default=[], choices=sorted(RULES_OFF),
                         metavar="RULE", help=f"switch rules off: {', '.join(sorted(RULES_OFF))}")
+    parser.add_argument("--sd-steps", type=int, default=None, metavar="N",
+                        help="SD's DDIM steps (default: the model's; the generalist's 10)")
     parser.add_argument("--json", metavar="FILE", help="also write every cell as JSON")
     parser.add_argument("--md", metavar="FILE", help="also write the table as markdown")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
@@ -175,7 +180,8 @@ def run(args: argparse.Namespace) -> int:
     result = run_general_benchmark(GeneralBenchSettings(
         maps=tuple(args.maps), problems=args.problems, seed=args.seed,
         sample_seed=args.sample_seed, robots=tuple(args.robots),
-        sd_model=model(args.sd_model), dd_model=model(args.dd_model), off=tuple(args.off)),
+        sd_model=model(args.sd_model), dd_model=model(args.dd_model), off=tuple(args.off),
+        sd_steps=args.sd_steps),
         progress=not args.no_progress)
     table = format_table(result)
     print(table)

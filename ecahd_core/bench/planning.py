@@ -99,6 +99,7 @@ class PlanningBenchSettings:
     warm_fraction: float = 0.0  # SparseConfig.warm_fraction: HD's warm-started re-plans (0: off)
     replan_spacing: float | None = None  # [m] HierarchicalPlanner's (None: by the map; 0: off)
     precision: str = "fp32"  # the SD Transformer's inference precision (SparseConfig.precision)
+    sd_steps: int | None = None  # SD's DDIM steps (SparseConfig.num_steps; None: the model's)
     leg_batches: int = LEG_BATCHES  # SparseConfig.leg_batches: a free first leg (-1: off)
     backtracks: int = BACKTRACKS  # HierarchicalPlanner's backtracking rounds (0: off)
     subgoals: bool = True  # HierarchicalPlanner's subgoal rule
@@ -289,7 +290,8 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                 guidance_weight=settings.guidance_weight,
                 guidance_space=settings.guidance_space,
                 warm_fraction=settings.warm_fraction, max_spacing=settings.max_spacing,
-                precision=settings.precision, leg_batches=settings.leg_batches),
+                precision=settings.precision, leg_batches=settings.leg_batches,
+                num_steps=settings.sd_steps),
                 cost=cost, place_reach=settings.place_reach, model=settings.sd_model)
             if method == "sd":
                 plan_fn = lambda s, g: (sd.plan(s, g, generator=gen).waypoints, None)  # noqa: E731
