@@ -98,9 +98,16 @@ def test_a_shaped_plan_in_collision_is_not_used(field, grid):
     plan = line((2.0, CENTRE_Y), (18.0, CENTRE_Y), 17)
     # no clearance asked of the searched points: the lane is searched up to the wall itself
     wall_lanes = LaneField.fit([line((1.5, 2.55), (18.5, 2.55))], grid)
-    res = shape_path(plan, wall_lanes, grid, fp, ShapeConfig(clearance=0.0))
+    loose = ShapeConfig(clearance=0.0)
+    # the whole move (to y 2.55) collides, half of it (to y 3.275) is free
+    res = shape_path(plan, wall_lanes, grid, fp, loose)
+    assert res.shaped and res.max_offset == pytest.approx(0.5 * (CENTRE_Y - 2.55), abs=0.05)
+    assert check_collision(res.path, fp, grid).collision_free
+    # from y 3.1 both collide (the circle's radius is 0.4 m): the plan stays as it came
+    near = line((2.0, 3.1), (18.0, 3.1), 17)
+    res = shape_path(near, wall_lanes, grid, fp, loose)
     assert res.kept_original and not res.shaped
-    np.testing.assert_array_equal(res.path, plan)
+    np.testing.assert_array_equal(res.path, near)
     # with the footprint's clearance the same field only takes it as near as is free
     res = shape_path(plan, wall_lanes, grid, fp)
     assert res.shaped and check_collision(res.path, fp, grid).collision_free
