@@ -4,8 +4,9 @@
     ecahd dataset --from-bags BAG... --map office.yaml --out demos.npz
     ecahd lanes --data demos.npz --out office_lanes.npz --png office_lanes.png
 
-The lane field is fitted in well under a second; ``ecahd plan --lanes`` and ``ecahd bench
-habits --lanes`` move plans onto it.
+The lane field is fitted in well under a second (the keep-out places: A* for every
+demonstrated trip, about a second more); the nodes' ``lanes`` parameter, ``ecahd demo
+--lanes`` and ``ecahd bench habits --lanes`` move plans onto it.
 """
 from __future__ import annotations
 
