@@ -231,13 +231,14 @@ class GlobalPlanner(ManagedNode):
         p = self.params
         check_frame(msg.header.frame_id, p.global_frame, "map")
         t0 = time.perf_counter()
-        grid = msg_to_grid(msg, name=p.map_name)
-        lanes = lanes_for(self._lanes, grid, self.get_logger())
-        if lanes is not None:  # the keep-out places learnt from the demonstrations are walls
-            grid = lanes.with_keep_out(grid)  # to every planner here (per-map models: new walls)
+        received = msg_to_grid(msg, name=p.map_name)
         # with a model, an update of the site's map keeps it (MapError: another extent)
-        learnt, changed = ((grid, 0.0) if p.method == "astar" or self._general
-                           else learnt_map(self._site, grid))
+        learnt, changed = ((received, 0.0) if p.method == "astar" or self._general
+                           else learnt_map(self._site, received))
+        lanes = lanes_for(self._lanes, received, self.get_logger())
+        # the keep-out places learnt from the demonstrations are walls to every planner here
+        # (a per-map model keeps its site: they are walls it never learnt, detoured by A*)
+        grid = received if lanes is None else lanes.with_keep_out(received)
         built = {}
         warm = ""
         if p.method == "sd":
@@ -254,7 +255,7 @@ class GlobalPlanner(ManagedNode):
         self._sd, self._dense, self._site = built.get("sd"), None, learnt
         self.map_changed = changed
         self.planning.set_map(grid, **built, learnt=learnt, lanes=lanes)
-        if learnt is not grid:
+        if learnt is not received:
             log = self.get_logger().warning if changed > p.map_change_warn else \
                 self.get_logger().info
             log(f"map updated: {100 * changed:.2f}% of its cells changed since the map the "

@@ -700,3 +700,33 @@ def test_with_the_generalist_a_map_of_another_extent_is_planned_on_at_once(rig, 
     assert r.planner.grid.fingerprint() == medium.fingerprint()
     path_xy = path_to_xy(r.plans[-1])
     assert np.allclose(path_xy[0], ROBOT) and np.allclose(path_xy[-1], (2.5, 3.5))
+
+
+def test_lanes_keep_out_places_are_planned_round(rig, tmp_path):
+    """``lanes``: a lane field whose keep-out place spans the y = 5.5 corridor at x 3.5..4 m
+    (never driven there, though the expert's routes cross it): the node plans round it as
+    round a wall, on the site's own model; the map it was given stays as it is."""
+    from ecahd_core.lanes import LaneConfig, LaneField
+
+    site = builtin_map("maze2d-large")
+    cfg = LaneConfig()
+    H, W = round(site.height * site.resolution / cfg.cell), round(site.width * site.resolution
+                                                                   / cfg.cell)
+    keep = np.zeros((H, W), dtype=bool)
+    keep[round(5.0 / cfg.cell):round(6.0 / cfg.cell), round(3.5 / cfg.cell):round(4.0 / cfg.cell)] \
+        = True
+    field = LaneField(density=np.zeros((cfg.bins, H, W), dtype=np.float32), origin=site.origin,
+                      config=cfg, map_name=site.name, map_fingerprint=site.fingerprint(),
+                      paths=1, length=1.0, keep_out=keep)
+    r = rig(lanes=str(field.save(tmp_path / "lanes.npz")))
+    start, goal = (1.5, 5.5), (5.5, 5.5)
+    r.send_map()
+    r.send_odom(start)
+    r.spin_until(lambda: r.planner.ready and r.planner.pose is not None)
+    assert not r.planner.grid.is_free(np.array([3.75, 5.5]))  # the keep-out: a wall to plan round
+    r.send_goal(goal)
+    r.spin_until(lambda: r.plans)
+    path = path_to_xy(r.plans[-1])
+    assert np.allclose(path[0], start) and np.allclose(path[-1], goal)
+    assert np.abs(path[:, 1] - 5.5).max() > 1.0  # round the keep-out through another corridor
+    assert site.is_free(np.array([3.75, 5.5]))
