@@ -191,8 +191,8 @@ def _speck_checker(specks, radius):
 def test_exact_rule_puts_back_a_free_plan_where_the_refined_one_collides(replan):
     start, goal = np.array([1.5, 1.5]), np.array([10.5, 7.5])
 
-    def plan_with(check):
-        hd = make_planner(replan=replan, exact_check=check)
+    def plan_with(check):  # the shortcut rule off: this test is about the joined local plans
+        hd = make_planner(replan=replan, exact_check=check, shortcut=False)
         return hd.plan(start, goal, generator=torch.Generator().manual_seed(0))
 
     base = plan_with(None)
@@ -227,6 +227,37 @@ def test_exact_rule_puts_back_a_free_plan_where_the_refined_one_collides(replan)
     # a checker that finds everything free changes nothing
     same = plan_with(lambda path: np.zeros(len(path) - 1, dtype=bool))
     assert np.array_equal(same.trajectory, base.trajectory) and not any(same.exact_kept)
+
+
+def test_the_shortcut_rule_pulls_a_free_plan_taut_and_keeps_its_segments():
+    """On a building (a held-out generated office, the shipped generalists): maze2d-large's 1 m
+    corridors leave no straight shortcut within J's margin."""
+    from ecahd_core.bench.replan import load_bench_map
+    from ecahd_core.collision import check_collision
+    from ecahd_core.cost import CollisionCost
+    from ecahd_core.problems import make_problems
+
+    grid, fp = load_bench_map("office:16x16:0.05:7001"), make_footprint("circle")
+    sd = SparseDiffusion.for_map(grid, fp, SparseConfig(), cost=CollisionCost.build(grid, fp),
+                                 model="general")
+    problem = make_problems(grid, 4, seed=5)[3]
+    plans = {}
+    for on in (False, True):
+        hd = HierarchicalPlanner.for_map(grid, fp, sd, model="general", shortcut=on)
+        plans[on] = hd.plan(problem.start, problem.goal,
+                            generator=torch.Generator().manual_seed(0))
+    off, ours = plans[False], plans[True]
+    assert check_collision(off.trajectory, fp, grid).collision_free  # else the rule stays out
+    assert not off.shortcut and ours.shortcut and "shortcut" in ours.timings_ms
+    assert check_collision(ours.trajectory, fp, grid).collision_free
+    assert np.array_equal(ours.trajectory[[0, -1]], off.trajectory[[0, -1]])
+    length = lambda p: np.linalg.norm(np.diff(p, axis=0), axis=1).sum()  # noqa: E731
+    assert length(ours.trajectory) < length(off.trajectory) - 0.2
+    # the same iterations and local plans: the rule only pulls the joined path
+    assert len(ours.segments) == len(off.segments)
+    for a, b in zip(ours.segments, off.segments):
+        assert np.array_equal(a, b)
+    assert ours.timings_ms["total"] >= ours.timings_ms["shortcut"]
 
 
 def test_resample_segment_gives_a_batch_of_dd_plans_between_fixed_ends():

@@ -39,7 +39,8 @@ HELD_OUT_MAPS = tuple(f"{kind}:{size}:0.05:{7000 + i}"
 RULES_OFF = {"placement": {"place_reach": 0.0}, "leg-batches": {"leg_batches": -1},
              "backtracks": {"backtracks": 0}, "subgoals": {"subgoals": False},
              "settle": {"settle": False}, "exact-rule": {"exact_rule": False},
-             "polish": {"polish_steps": 0}, "keep-better": {"keep_better": False}}
+             "polish": {"polish_steps": 0}, "keep-better": {"keep_better": False},
+             "shortcut": {"shortcut": False}}
 
 
 @dataclass(frozen=True, kw_only=True)

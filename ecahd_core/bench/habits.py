@@ -260,9 +260,11 @@ def run_habits_benchmark(settings: HabitsBenchSettings, *, progress: bool = True
 
     def ecahd(sd, lanes=None, on=None):  # Algorithm 1 with our rules and its safety net
         on = grid if on is None else on
+        # the shortcut rule off: it pulls a whole plan taut, which the nodes, following it
+        # iteration by iteration, never do (and it would cut the habit's lanes)
         hd = HierarchicalPlanner.for_map(
             on, fp, sd, dense=dense, replan=d.replan, replan_spacing=d.replan_spacing,
-            backtracks=d.backtracks, subgoals=d.subgoals, settle=d.settle,
+            backtracks=d.backtracks, subgoals=d.subgoals, settle=d.settle, shortcut=False,
             exact=d.exact_rule, model=settings.dd_model, learnt=grid)
         hd.stage.lanes = lanes
         net = SafetyNet(on, fp, SafetyNetConfig(retries=d.net_retries,

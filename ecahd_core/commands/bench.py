@@ -244,6 +244,11 @@ def _add_planning_arguments(parser: argparse.ArgumentParser) -> None:
                         help="HD, every_waypoint, on building maps: turn off the settle rule "
                              "(an SD plan whose every straight leg is free by the leg test is "
                              "followed whole instead of re-planned at each waypoint; ours)")
+    parser.add_argument("--no-shortcut", action="store_true",
+                        help="HD with the exact rule: turn off the shortcut rule (a plan the "
+                             "exact checker finds free is pulled taut by straight segments "
+                             "whose J cost is <= c_th and that the exact checker finds free; "
+                             "ours)")
     parser.add_argument("--guidance", choices=tuple(GUIDANCE_RUNS), default=d.guidance,
                         help="run the diffusion methods with and without J's guidance, or only "
                              "one of the two (on: ECAHD's own setting)")
@@ -276,8 +281,8 @@ def _run_planning(args: argparse.Namespace) -> int:
         place_reach=args.place_reach, ablation=not args.no_ablation, precision=args.precision,
         net_resamples=args.net_resamples, replan_spacing=args.replan_spacing,
         guidance=args.guidance, leg_batches=args.leg_batches, backtracks=args.backtracks,
-        subgoals=not args.no_subgoals, settle=not args.no_settle, sd_model=args.sd_model,
-        dd_model=args.dd_model)
+        subgoals=not args.no_subgoals, settle=not args.no_settle,
+        shortcut=not args.no_shortcut, sd_model=args.sd_model, dd_model=args.dd_model)
     result = run_planning_benchmark(settings, progress=not args.no_progress)
     md = format_markdown(result)
     print(md)

@@ -100,6 +100,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="ECAHD/HD: keep a refined local plan the exact checker finds colliding "
                         "even where the straight or unpolished one is free (ours: put that "
                         "back)")
+    p.add_argument("--no-shortcut", action="store_true",
+                   help="ECAHD/HD: keep the joined local plans as they are (ours: a plan the "
+                        "exact checker finds free is pulled taut by straight segments whose J "
+                        "cost is <= c_th and that the exact checker finds free)")
     add_replan_argument(p)
     p.add_argument("--safety-net", action=argparse.BooleanOptionalAction, default=True,
                    help="ours, beyond the paper: judge the plan by the exact checker; when it "
@@ -280,7 +284,8 @@ def _plan_diffusion(args, grid, footprint, start, goal):
     hd = HierarchicalPlanner.for_map(grid, footprint, sd,
                                      dense=DenseConfig(guidance=guided, **polish),
                                      replan=args.replan, replan_spacing=args.replan_spacing,
-                                     exact=not args.no_exact_rule, model=args.dd_model)
+                                     exact=not args.no_exact_rule,
+                                     shortcut=not args.no_shortcut, model=args.dd_model)
     hd.plan(start, goal, generator=gen())  # warm-up
     plan = hd.plan(start, goal, generator=gen())
     # footprint outlines where DD fired
@@ -293,4 +298,5 @@ def _plan_diffusion(args, grid, footprint, start, goal):
                                           "first_leg_changed": plan.first_leg_changed,
                                           "backtracked": plan.backtracked,
                                           "subgoals": plan.subgoals,
-                                          "settled": plan.settled})
+                                          "settled": plan.settled,
+                                          "shortcut": plan.shortcut})

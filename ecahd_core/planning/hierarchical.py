@@ -27,7 +27,8 @@ class HierarchicalPlan:
     """Result of Algorithm 1 on one problem.
 
     Attributes:
-        trajectory: (N, 2) [m] the executed dense path (local plans joined end to end).
+        trajectory: (N, 2) [m] the executed dense path: the local plans joined end to end, pulled
+            taut by the shortcut rule (``HierarchicalPlanner``'s ``shortcut``) when it acted.
         global_plans: the sparse plan t^g_p of every iteration p, each (P^g - p, 2) [m].
         segments: the local plan t^l_p of every iteration, each (P^l, 2) [m].
         dd_segments: per iteration, whether DD replaced the straight local plan.
@@ -45,6 +46,8 @@ class HierarchicalPlan:
             took another SD candidate.
         settled: the iteration whose SD plan the settle rule (``HierarchicalPlanner``'s
             ``settle``) followed whole, or None.
+        shortcut: the shortcut rule pulled ``trajectory`` taut (``segments`` are still the
+            local plans before it).
     """
 
     trajectory: np.ndarray
@@ -59,6 +62,7 @@ class HierarchicalPlan:
     first_leg: list = field(default_factory=list)
     backtracked: int = 0
     settled: int | None = None
+    shortcut: bool = False
 
     @property
     def dd_calls(self) -> int:
@@ -126,13 +130,18 @@ class HierarchicalPlanner(DenseStage):
             from its start the iterations re-plan at each waypoint as without the rule (a
             backtracking round). :attr:`HierarchicalPlan.settled` is the iteration whose plan
             was followed (None after such a cut).
+        shortcut: the shortcut rule (ours; with ``exact_check``): a whole plan the exact
+            checker finds free is pulled taut by straight segments that pass Algorithm 1's
+            local test (J's c^l <= c_th over P^l points) and the exact checker
+            (:func:`~ecahd_core.shortcut.shortcut_path`). :attr:`HierarchicalPlan.shortcut`
+            says when it acted; its time is ``timings_ms["shortcut"]``.
     """
 
     def __init__(self, sparse: SparseDiffusion, dense_checkpoint, *, costmap, footprint_points,
                  cost_config=None, dense: DenseConfig | None = None, device: str = "cpu",
                  replan: str = "every_waypoint", exact_check=None,
                  replan_spacing: float | None = None, backtracks: int = BACKTRACKS,
-                 subgoals: bool = True, settle: bool = True) -> None:
+                 subgoals: bool = True, settle: bool = True, shortcut: bool = True) -> None:
         if int(backtracks) != backtracks or backtracks < 0:
             raise EcahdError(f"backtracks must be an integer >= 0 (0: off), got {backtracks!r}")
         # one iteration's SD plan with its rules: the same object the online planner calls
@@ -143,12 +152,13 @@ class HierarchicalPlanner(DenseStage):
                          exact_check=exact_check)
         self.backtracks = int(backtracks)
         self.sparse = sparse
+        self.shortcut = bool(shortcut)
 
     @classmethod
     def for_map(cls, grid, footprint, sd: SparseDiffusion, *, dense: DenseConfig | None = None,
                 replan: str = "every_waypoint", replan_spacing: float | None = None,
                 exact: bool = True, backtracks: int = BACKTRACKS, subgoals: bool = True,
-                settle: bool = True, model: str | None = None,
+                settle: bool = True, shortcut: bool = True, model: str | None = None,
                 device: str = "cpu", learnt=None) -> "HierarchicalPlanner":
         """Algorithm 1 on ``grid`` for ``footprint`` over ``sd`` (``SparseDiffusion.for_map``)
         as ``ecahd plan`` and the benchmarks build it: the map's DD model (``model``: a path,
@@ -166,7 +176,8 @@ class HierarchicalPlanner(DenseStage):
                    dense=dense, device=device, replan=replan,
                    replan_spacing=replan_spacing_for(grid, replan_spacing, sd.expert_spacing),
                    exact_check=exact_check_for(grid, footprint) if exact else None,
-                   backtracks=backtracks, subgoals=subgoals, settle=settle)
+                   backtracks=backtracks, subgoals=subgoals, settle=settle,
+                   shortcut=shortcut)
 
     @property
     def replan(self) -> str:
@@ -235,7 +246,26 @@ class HierarchicalPlanner(DenseStage):
         placed = sum(sp.placed for sp in sparse_plans if sp is not None)
         times.update(stages.timings_ms)
         result = self._result(global_plans, stages, times, t_total, placed, first_leg)
-        return replace(result, backtracked=backtracked, settled=settled)
+        return self._pulled(replace(result, backtracked=backtracked, settled=settled), t_total)
+
+    def _pulled(self, result: HierarchicalPlan, t_total: float) -> HierarchicalPlan:
+        """The shortcut rule (``shortcut``) on a finished plan: its trajectory pulled taut when
+        the exact checker finds it free; the total time then includes the rule's."""
+        if not (self.shortcut and self.exact_check is not None
+                and not self.exact_check(result.trajectory).any()):
+            return result
+        from ecahd_core.shortcut import shortcut_path
+
+        t0 = time.perf_counter()
+        pulled = shortcut_path(result.trajectory,
+                               cost=lambda plans: self.local_cost(plans, plans[:, -1]),
+                               c_th=self.dense.c_th, points=self.dense.points,
+                               exact_check=self.exact_check)
+        times = dict(result.timings_ms)
+        times["shortcut"] = (time.perf_counter() - t0) * 1e3
+        times["total"] = (time.perf_counter() - t_total) * 1e3
+        return replace(result, trajectory=pulled, timings_ms=times,
+                       shortcut=len(pulled) < len(result.trajectory))
 
     @property
     def _backtracking(self) -> bool:
@@ -333,8 +363,9 @@ class HierarchicalPlanner(DenseStage):
                                                                           dtype=torch.bool),
                                    joined=True, generator=generator)
         times.update(stages.timings_ms)
-        return self._result([waypoints[p:] for p in range(len(waypoints) - 1)], stages, times,
-                            t_total, sparse.placed, [""] * (len(waypoints) - 1))
+        return self._pulled(self._result([waypoints[p:] for p in range(len(waypoints) - 1)],
+                                         stages, times, t_total, sparse.placed,
+                                         [""] * (len(waypoints) - 1)), t_total)
 
     @staticmethod
     def _result(global_plans: list, stages: LocalStages, times: dict, t_total: float,
