@@ -76,11 +76,6 @@ PARAMETERS = [
                               "by the leg test is followed whole, not re-planned at each "
                               "waypoint, and a plan toward a subgoal whose legs up to it are "
                               "free is followed to the subgoal (the settle rule)"),
-    ParamSpec("skip", _ONLINE.skip, "sd, where the settle rule acts, no lanes: a waypoint of the "
-                          "followed part of a plan is dropped where a straight leg from the "
-                          "waypoint before it to one after it costs <= 0.1 by J (no DD "
-                          "needed) and is free by the leg test (the skip rule): fewer "
-                          "re-plans, shorter paths"),
     ParamSpec("replan_timeout", _RUNNER.replan_timeout, "[s] sd: with no progress toward the next waypoint (reaching "
                                      "it, or coming 0.25 m nearer it than before) for this long, "
                                      "replan from the current pose (same horizon); doubles with "
@@ -149,8 +144,7 @@ class GlobalPlannerParams:
         return OnlinePlannerConfig(method=self.method, place_reach=self.place_reach,
                                    leg_repair=self.leg_repair, repair_reach=self.repair_reach,
                                    replan_spacing=self.replan_spacing, subgoals=self.subgoals,
-                                   settle=self.settle, skip=self.skip,
-                                   obstacle_memory=self.obstacle_memory)
+                                   settle=self.settle, obstacle_memory=self.obstacle_memory)
 
     def mission_config(self) -> MissionConfig:
         """When a navigate_to_pose goal is reached: the position within waypoint_tolerance

@@ -105,7 +105,6 @@ class PlanningBenchSettings:
     subgoals: bool = True  # HierarchicalPlanner's subgoal rule
     settle: bool = True  # HierarchicalPlanner's settle rule
     shortcut: bool = True  # HierarchicalPlanner's shortcut rule
-    skip: bool = True  # SparseStage's skip rule
     ablation: bool = True
     guidance: str = "both"  # diffusion methods with and without guidance, or "on" / "off" only
     safety_net: bool = True  # ours: judge HD / ECAHD with and without the net (ecahd_core.safety)
@@ -307,7 +306,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                         polish_across=settings.polish_across, keep_better=settings.keep_better),
                     replan=settings.replan, replan_spacing=settings.replan_spacing,
                     backtracks=settings.backtracks, subgoals=settings.subgoals,
-                    settle=settings.settle, shortcut=settings.shortcut, skip=settings.skip,
+                    settle=settings.settle, shortcut=settings.shortcut,
                     exact=settings.exact_rule and not variant,
                     model=settings.dd_model)
                 spacings[robot] = hd.replan_spacing
@@ -403,7 +402,7 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
                "keep_better": settings.keep_better, "exact_rule": settings.exact_rule,
                "leg_batches": settings.leg_batches, "backtracks": settings.backtracks,
                "subgoals": settings.subgoals,
-               "settle": settings.settle, "shortcut": settings.shortcut, "skip": settings.skip,
+               "settle": settings.settle, "shortcut": settings.shortcut,
                "replan": settings.replan, "warm_fraction": settings.warm_fraction,
                # one number when every robot's model asked for the same, else per robot
                "replan_spacing": (next(iter(spacings.values()))

@@ -249,10 +249,6 @@ def _add_planning_arguments(parser: argparse.ArgumentParser) -> None:
                              "exact checker finds free is pulled taut by straight segments "
                              "whose J cost is <= c_th and that the exact checker finds free; "
                              "ours)")
-    parser.add_argument("--no-skip", action="store_true",
-                        help="HD, where the settle rule acts: turn off the skip rule (SD's "
-                             "waypoints passed by a straight leg free by J's local test and the "
-                             "leg test are dropped from the followed part of a plan; ours)")
     parser.add_argument("--guidance", choices=tuple(GUIDANCE_RUNS), default=d.guidance,
                         help="run the diffusion methods with and without J's guidance, or only "
                              "one of the two (on: ECAHD's own setting)")
@@ -286,8 +282,7 @@ def _run_planning(args: argparse.Namespace) -> int:
         net_resamples=args.net_resamples, replan_spacing=args.replan_spacing,
         guidance=args.guidance, leg_batches=args.leg_batches, backtracks=args.backtracks,
         subgoals=not args.no_subgoals, settle=not args.no_settle,
-        shortcut=not args.no_shortcut, skip=not args.no_skip, sd_model=args.sd_model,
-        dd_model=args.dd_model)
+        shortcut=not args.no_shortcut, sd_model=args.sd_model, dd_model=args.dd_model)
     result = run_planning_benchmark(settings, progress=not args.no_progress)
     md = format_markdown(result)
     print(md)

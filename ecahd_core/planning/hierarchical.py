@@ -135,22 +135,18 @@ class HierarchicalPlanner(DenseStage):
             local test (J's c^l <= c_th over P^l points) and the exact checker
             (:func:`~ecahd_core.shortcut.shortcut_path`). :attr:`HierarchicalPlan.shortcut`
             says when it acted; its time is ``timings_ms["shortcut"]``.
-        skip: the skip rule (``rules.SparseStage``'s; ours): SD's waypoints that straight legs
-            free by J's local test and the leg test pass by are dropped from the part of each
-            plan that is followed.
     """
 
     def __init__(self, sparse: SparseDiffusion, dense_checkpoint, *, costmap, footprint_points,
                  cost_config=None, dense: DenseConfig | None = None, device: str = "cpu",
                  replan: str = "every_waypoint", exact_check=None,
                  replan_spacing: float | None = None, backtracks: int = BACKTRACKS,
-                 subgoals: bool = True, settle: bool = True, shortcut: bool = True,
-                 skip: bool = True) -> None:
+                 subgoals: bool = True, settle: bool = True, shortcut: bool = True) -> None:
         if int(backtracks) != backtracks or backtracks < 0:
             raise EcahdError(f"backtracks must be an integer >= 0 (0: off), got {backtracks!r}")
         # one iteration's SD plan with its rules: the same object the online planner calls
         self.stage = SparseStage(sparse, replan=replan, replan_spacing=replan_spacing,
-                                 subgoals=subgoals, settle=settle, skip=skip)
+                                 subgoals=subgoals, settle=settle)
         super().__init__(dense_checkpoint, costmap=costmap, footprint_points=footprint_points,
                          cost_config=cost_config, dense=dense, device=device,
                          exact_check=exact_check)
@@ -162,8 +158,7 @@ class HierarchicalPlanner(DenseStage):
     def for_map(cls, grid, footprint, sd: SparseDiffusion, *, dense: DenseConfig | None = None,
                 replan: str = "every_waypoint", replan_spacing: float | None = None,
                 exact: bool = True, backtracks: int = BACKTRACKS, subgoals: bool = True,
-                settle: bool = True, shortcut: bool = True, skip: bool = True,
-                model: str | None = None,
+                settle: bool = True, shortcut: bool = True, model: str | None = None,
                 device: str = "cpu", learnt=None) -> "HierarchicalPlanner":
         """Algorithm 1 on ``grid`` for ``footprint`` over ``sd`` (``SparseDiffusion.for_map``)
         as ``ecahd plan`` and the benchmarks build it: the map's DD model (``model``: a path,
@@ -182,7 +177,7 @@ class HierarchicalPlanner(DenseStage):
                    replan_spacing=replan_spacing_for(grid, replan_spacing, sd.expert_spacing),
                    exact_check=exact_check_for(grid, footprint) if exact else None,
                    backtracks=backtracks, subgoals=subgoals, settle=settle,
-                   shortcut=shortcut, skip=skip)
+                   shortcut=shortcut)
 
     @property
     def replan(self) -> str:

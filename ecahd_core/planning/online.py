@@ -250,7 +250,7 @@ class OnlinePlannerConfig:
         repair_reach: [m] leg repair's reach; -1: the placer's default.
         replan_spacing: [m] -1: by the map and the SD model (``auto_replan_spacing``); 0: off
             (Algorithm 1's P^g - p); else the spacing.
-        subgoals, settle, skip: the subgoal, settle and skip rules (``rules.SparseStage``).
+        subgoals, settle: the subgoal and settle rules (``rules.SparseStage``).
         obstacle_memory: [s] obstacles the local costmap found are avoided for this long
             unless seen gone.
     """
@@ -262,7 +262,6 @@ class OnlinePlannerConfig:
     replan_spacing: float = -1.0
     subgoals: bool = True
     settle: bool = True
-    skip: bool = True
     obstacle_memory: float = 60.0
 
     def __post_init__(self) -> None:
@@ -383,7 +382,7 @@ class OnlinePlanner:
             placer = self._placer(grid, "place") if self.placement_on else None
             self.stage = SparseStage(sd.on(placer=placer), replan=self.runner.config.replan,
                                      replan_spacing=spacing, subgoals=c.subgoals,
-                                     settle=c.settle, skip=c.skip)
+                                     settle=c.settle)
             if self.stage.subgoaling():
                 self.stage.subgoal_rule().field.graph  # the cost-to-go's graph, built now
             if lanes is not None:
@@ -491,8 +490,6 @@ class OnlinePlanner:
                                                            last_reach=SNAP_DISTANCE)
             if moved:
                 detail += f", {moved} waypoint(s) snapped out of walls"
-        if step.skipped:
-            detail += f", {step.skipped} waypoint(s) skipped by straight free legs (skip rule)"
         if step.settled:
             detail += ", every leg free: followed whole (settle rule)"
         elif step.follow > 1 and not step.forced:

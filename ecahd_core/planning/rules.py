@@ -18,17 +18,11 @@ The rules (ours, beyond the paper), each with its one gate here:
 - **settle** (:meth:`SparseStage.settling`): a plan whose every straight leg is free by the
   placer's leg test is followed whole (no re-plan at its waypoints); a plan toward a subgoal
   whose legs up to it are free is followed to the subgoal.
-- **skip** (:meth:`SparseStage.skipping`): a waypoint that the robot can pass by a straight leg
-  from the waypoint before it to one after it, a leg that Algorithm 1's local test accepts
-  (J's c^l <= c_th: no DD needed) and the placer's leg test finds free, is dropped from the
-  part of the plan that is followed: the first leg under Algorithm 1, the whole plan under the
-  settle rule, up to the subgoal. Fewer waypoints: fewer re-plans, shorter paths.
 - **forced last plan** (:data:`~ecahd_core.planning.horizon.MAX_EXTRA_ITERATIONS`): a re-plan
   loop that has run that many iterations beyond P^g - 2 follows its last SD plan whole.
 
-The subgoal, settle and skip rules act where re-plans have a replan spacing and the
-free-first-leg rule is on: building maps by default (maze2d-large keeps the paper's
-Algorithm 1). Skip is off while lanes learnt from demonstrations move the waypoints.
+The subgoal and settle rules act where re-plans have a replan spacing and the free-first-leg
+rule is on: building maps by default (maze2d-large keeps the paper's Algorithm 1).
 """
 from __future__ import annotations
 
@@ -40,11 +34,6 @@ from ecahd_core.errors import EcahdError
 from ecahd_core.planning.horizon import (MAX_EXTRA_ITERATIONS, REPLAN_POLICIES,
                                          check_replan_spacing, replan_horizon)
 from ecahd_core.planning.sparse import SparseDiffusion, SparsePlan
-
-# the skip rule's local test: a straight local plan of SKIP_POINTS points costing at most
-# SKIP_C_TH by J is what Algorithm 1 follows without DD (DenseConfig's c_th and P^l defaults)
-SKIP_C_TH = 0.1
-SKIP_POINTS = 4
 
 
 @dataclass(frozen=True)
@@ -60,7 +49,6 @@ class GlobalStep:
             settle rule, a forced last plan), in between a plan followed to its subgoal.
         settled: the settle rule accepted the whole plan.
         forced: the loop ran out of iterations and follows this plan whole.
-        skipped: waypoints of SD's plan the skip rule dropped.
     """
 
     sparse: SparsePlan
@@ -68,7 +56,6 @@ class GlobalStep:
     follow: int
     settled: bool = False
     forced: bool = False
-    skipped: int = 0
 
 
 class SparseStage:
@@ -83,12 +70,11 @@ class SparseStage:
             the goal (:func:`~ecahd_core.planning.horizon.replan_horizon`); None: P^g - p.
         subgoals: the subgoal rule (on where its gate allows).
         settle: the settle rule (on where its gate allows).
-        skip: the skip rule (on where its gate allows).
     """
 
     def __init__(self, sd: SparseDiffusion, *, replan: str = "every_waypoint",
                  replan_spacing: float | None = None, subgoals: bool = True,
-                 settle: bool = True, skip: bool = True) -> None:
+                 settle: bool = True) -> None:
         if replan not in REPLAN_POLICIES:
             raise EcahdError(f"replan policy {replan!r} is not one of {list(REPLAN_POLICIES)}")
         self.sd = sd
@@ -96,7 +82,6 @@ class SparseStage:
         self.replan_spacing = check_replan_spacing(replan_spacing)
         self.subgoals = bool(subgoals)
         self.settle = bool(settle)
-        self.skip = bool(skip)
         self._subgoal_rule = None  # progress.SubgoalRule on the static placer's map, built once
         # the lanes learnt from demonstrations (ecahd_core.lanes.WaypointLanes) or None: every
         # plan's interior waypoints are moved onto them before they are followed
@@ -125,49 +110,6 @@ class SparseStage:
         sd = sd or self.sd
         return (self.settle and self.every_waypoint and self.replan_spacing is not None
                 and sd.placer is not None and sd.config.leg_batches >= 0)
-
-    def skipping(self, sd: SparseDiffusion | None = None) -> bool:
-        """Whether the skip rule acts: ``skip``, the settle rule's gate, J (SD's ``cost``) and
-        no lanes."""
-        sd = sd or self.sd
-        return self.skip and self.lanes is None and sd.cost is not None and self.settling(sd)
-
-    def straight_free(self, a: np.ndarray, bs: np.ndarray, sd: SparseDiffusion) -> np.ndarray:
-        """The skip rule's test of straight legs a -> bs[k]: J's c^l of the straight local plan
-        (SKIP_POINTS points) <= SKIP_C_TH and no wall by the placer's leg test.
-        a: (2,) [m], bs: (K, 2) [m] -> (K,) bool."""
-        import torch
-
-        bs = np.asarray(bs, dtype=np.float64).reshape(-1, 2)
-        t = torch.linspace(0.0, 1.0, SKIP_POINTS, dtype=torch.float32)[None, :, None]
-        a_t = torch.as_tensor(a, dtype=torch.float32)
-        plans = a_t + t * (torch.as_tensor(bs, dtype=torch.float32)[:, None, :] - a_t)
-        with torch.no_grad():
-            ok = (sd.cost.collision_cost(plans) <= SKIP_C_TH).cpu().numpy()
-        if ok.any():
-            walls = sd.placer.wall_length(np.broadcast_to(a, bs[ok].shape), bs[ok])
-            ok[np.flatnonzero(ok)[walls > 0]] = False
-        return ok
-
-    def pulled(self, waypoints: np.ndarray, sd: SparseDiffusion, *, first_only: bool = False
-               ) -> np.ndarray:
-        """The skip rule on ``waypoints`` (P, 2) [m]: from each kept waypoint (the first only
-        with ``first_only``), the next kept one is the furthest whose straight leg passes
-        :meth:`straight_free`. Returns (P', 2) [m], the same ends."""
-        wp = np.asarray(waypoints, dtype=np.float64)
-        kept, a = [0], 0
-        while a < len(wp) - 1:
-            nxt = a + 1
-            far = np.arange(len(wp) - 1, a + 1, -1)  # beyond a + 1, furthest first
-            if len(far):
-                ok = self.straight_free(wp[a], wp[far], sd)
-                if ok.any():
-                    nxt = int(far[int(np.argmax(ok))])
-            if first_only:
-                return wp[[0] + list(range(nxt, len(wp)))]
-            kept.append(nxt)
-            a = nxt
-        return wp[kept]
 
     def legs_free(self, waypoints: np.ndarray, sd: SparseDiffusion | None = None) -> bool:
         """The settle rule's test: every straight leg of ``waypoints`` (P, 2) [m] is free by the
@@ -238,16 +180,10 @@ class SparseStage:
         whole = len(wp) - 1
         if not self.every_waypoint or forced:
             return GlobalStep(sparse, wp, whole, forced=forced)
-        skip = self.skipping(sd) and len(wp) > 2
         if settle and len(wp) > 2 and self.legs_free(wp, sd):
-            out = self.pulled(wp, sd) if skip else wp
-            return GlobalStep(sparse, out, len(out) - 1, settled=True,
-                              skipped=len(wp) - len(out))
+            return GlobalStep(sparse, wp, whole, settled=True)
         # a plan toward a subgoal whose legs up to the subgoal are free: followed to the
         # subgoal (its last leg, to G, is left to the re-plans)
         if settle and sparse.first_leg == "subgoal" and self.legs_free(wp[:-1], sd):
-            head = self.pulled(wp[:-1], sd) if skip else wp[:-1]
-            return GlobalStep(sparse, np.concatenate([head, wp[-1:]]), max(1, len(head) - 1),
-                              skipped=len(wp) - 1 - len(head))
-        out = self.pulled(wp, sd, first_only=True) if skip else wp
-        return GlobalStep(sparse, out, 1, skipped=len(wp) - len(out))
+            return GlobalStep(sparse, wp, max(1, len(wp) - 2))
+        return GlobalStep(sparse, wp, 1)
