@@ -196,7 +196,7 @@ class SubgoalRule:
             return sparse
         wp = sparse.waypoints
         g_start, g_next = to_go(wp[:2])
-        blocked = sd._leg_blocked(wp)
+        blocked = sd.leg_blocked(wp)
         if not blocked and g_next <= g_start - SUBGOAL_TRIGGER:
             return sparse
         route = to_go.route(S, SUBGOAL_REACH * self.spacing)
@@ -211,7 +211,7 @@ class SubgoalRule:
         h = max(3, replan_horizon(sd.config.horizon, iteration, S, sub, self.spacing))
         alt = sd.plan(S, sub, horizon=h, generator=generator, repair_legs=1)
         w = alt.waypoints
-        if sd._leg_blocked(w) or not (to_go(w[1:2])[0]
+        if sd.leg_blocked(w) or not (to_go(w[1:2])[0]
                                       < (g_start if blocked else g_next) - SUBGOAL_GAIN):
             return sparse
         return replace(alt, waypoints=np.concatenate([w, G[None]]), first_leg="subgoal")

@@ -590,3 +590,39 @@ def test_backtracking_takes_another_candidate_where_a_local_plan_still_collides(
     assert plain.backtracked == 0
     with pytest.raises(EcahdError, match="backtracks"):
         planner(free, -1)
+
+
+@pytest.mark.parametrize("warm_plan", ["through", "round"])
+def test_a_warm_replan_whose_first_leg_crosses_a_wall_is_drawn_again_from_noise(warm_plan):
+    """SparseStage with warm starts: a warm re-plan's first leg through a wall sends the re-plan
+    back to noise under the free-first-leg rule; a warm re-plan whose first leg is free stays."""
+    from types import SimpleNamespace
+
+    from ecahd_core.placement import WaypointPlacer
+    from ecahd_core.planning.rules import SparseStage
+
+    fp = make_footprint("circle")
+    sd = SparseDiffusion(load_model("sd", GRID, footprint=fp),
+                         SparseConfig(num_candidates=4, leg_batches=3, warm_fraction=0.3),
+                         placer=WaypointPlacer(GRID, fp, reach=0.1, leg_rounds=0))
+    warm_draw = THROUGH if warm_plan == "through" else ROUND
+    calls = []
+
+    def sample(*, batch, horizon, warm_start=None, **kwargs):
+        calls.append(warm_start is not None)
+        plan = warm_draw if warm_start is not None else ROUND
+        return SimpleNamespace(trajectories=torch.as_tensor(np.stack([plan] * batch),
+                                                            dtype=torch.float32))
+
+    sd.sampler.sample = sample
+    step = SparseStage(sd).step(S_, G_, previous=THROUGH, iteration=1, horizon=3)
+    np.testing.assert_allclose(step.waypoints, ROUND, atol=1e-6)
+    if warm_plan == "through":
+        assert calls == [True, False]
+        assert step.sparse.first_leg == "cold" and not step.sparse.warm
+    else:
+        assert calls == [True] and step.sparse.warm and step.sparse.first_leg == ""
+    # a goal's first plan is never warm
+    calls.clear()
+    SparseStage(sd).step(S_, G_, iteration=0, horizon=3)
+    assert calls == [False]

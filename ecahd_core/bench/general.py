@@ -54,6 +54,7 @@ class GeneralBenchSettings:
     dd_model: str | None = "general"
     off: tuple[str, ...] = ()  # rules switched off (RULES_OFF)
     sd_steps: int | None = None  # SD's DDIM steps (None: the model's; the generalist's: 10)
+    warm_fraction: float = 0.0  # re-plans warm-started from the plan before (SparseConfig's)
 
 
 @dataclass
@@ -95,7 +96,7 @@ def run_general_benchmark(settings: GeneralBenchSettings, *, progress: bool = Tr
             sample_seed=settings.sample_seed, per_problem_seeds=True,
             robots=tuple(settings.robots), methods=("hd",), guidance="on", ablation=False,
             sd_model=settings.sd_model, dd_model=settings.dd_model,
-            sd_steps=settings.sd_steps, **overrides),
+            sd_steps=settings.sd_steps, warm_fraction=settings.warm_fraction, **overrides),
             progress=progress)
         for cell in r.cells:
             result.cells.append({"map": spec, "family": family_of(spec), **cell.to_dict()})
@@ -169,6 +170,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         metavar="RULE", help=f"switch rules off: {', '.join(sorted(RULES_OFF))}")
     parser.add_argument("--sd-steps", type=int, default=None, metavar="N",
                         help="SD's DDIM steps (default: the model's; the generalist's 10)")
+    parser.add_argument("--warm-fraction", type=float, default=d.warm_fraction, metavar="F",
+                        help="SD's re-plans start from the rest of the plan before, noised to "
+                             "the last F (0..1) of the DDIM schedule; 0: from noise (the paper)")
     parser.add_argument("--json", metavar="FILE", help="also write every cell as JSON")
     parser.add_argument("--md", metavar="FILE", help="also write the table as markdown")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
@@ -182,7 +186,7 @@ def run(args: argparse.Namespace) -> int:
         maps=tuple(args.maps), problems=args.problems, seed=args.seed,
         sample_seed=args.sample_seed, robots=tuple(args.robots),
         sd_model=model(args.sd_model), dd_model=model(args.dd_model), off=tuple(args.off),
-        sd_steps=args.sd_steps),
+        sd_steps=args.sd_steps, warm_fraction=args.warm_fraction),
         progress=not args.no_progress)
     table = format_table(result)
     print(table)

@@ -10,8 +10,10 @@ The rules (ours, beyond the paper), each with its one gate here:
 - **free first leg** (:meth:`SparseStage.leg_rule`; ``SparseConfig.leg_batches``): a re-plan
   whose caller follows only its first leg (every_waypoint) takes another candidate, or a further
   batch, when the selected one's first leg crosses a wall after placement and leg repair. Needs
-  the SD's ``placer`` (building maps) and acts with cold re-plans only (a warm start repairs
-  every leg instead).
+  the SD's ``placer`` (building maps) and acts with cold re-plans only: a warm-started re-plan
+  (``SparseConfig.warm_fraction``) repairs every leg instead, and one whose first leg still
+  crosses a wall is drawn again from noise under the rule (``first_leg`` "cold" when that
+  draw's first leg was free as selected).
 - **subgoal** (:meth:`SparseStage.subgoaling`; :class:`~ecahd_core.progress.SubgoalRule`): a
   re-plan beyond Algorithm 1's P^g - 1 iterations whose first leg makes no progress by the
   goal's cost-to-go plans toward a point on the shortest route.
@@ -26,7 +28,7 @@ rule is on: building maps by default (maze2d-large keeps the paper's Algorithm 1
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -93,11 +95,11 @@ class SparseStage:
         return self.replan == "every_waypoint"
 
     def leg_rule(self, sd: SparseDiffusion | None = None) -> bool:
-        """Whether SD's free-first-leg rule acts: every_waypoint, cold re-plans, a placer and
-        ``leg_batches`` >= 0 (``sd``: the view planned with; None: the static one)."""
+        """Whether SD's free-first-leg rule acts: every_waypoint, a placer and ``leg_batches``
+        >= 0 (``sd``: the view planned with; None: the static one). With warm starts it acts
+        on the re-plans drawn again from noise (:meth:`step`)."""
         sd = sd or self.sd
-        return (self.every_waypoint and sd.placer is not None and sd.config.leg_batches >= 0
-                and sd.config.warm_fraction == 0)
+        return self.every_waypoint and sd.placer is not None and sd.config.leg_batches >= 0
 
     def subgoaling(self, sd: SparseDiffusion | None = None) -> bool:
         """Whether the subgoal rule acts: ``subgoals``, a replan spacing, the free-first-leg
@@ -172,6 +174,13 @@ class SparseStage:
         first_leg_only = self.every_waypoint and not forced and sd.config.warm_fraction == 0
         sparse = sd.replan(S, G, previous, horizon=horizon, generator=generator,
                            repair_legs=1 if first_leg_only else None)
+        if (sparse.warm and self.every_waypoint and not forced and sd.placer is not None
+                and sd.config.leg_batches >= 0 and sd.leg_blocked(sparse.waypoints)):
+            # a warm re-plan whose first leg still crosses a wall after every leg's repair:
+            # drawn again from noise, with the free-first-leg rule (the warm start's speed
+            # where the plan before was right, the rule's choice where it was not)
+            sparse = sd.plan(S, G, horizon=horizon, generator=generator, repair_legs=1)
+            sparse = replace(sparse, first_leg=sparse.first_leg or "cold")
         if (self.every_waypoint and not forced and iteration >= sd.config.horizon - 1
                 and self.subgoaling(sd)):  # beyond where Algorithm 1 would have reached G
             sparse = self.subgoal_rule().apply(sd, S, G, sparse, iteration,

@@ -170,7 +170,9 @@ class SparsePlan:
             selected candidate's first leg was free, or the rule is off), "other" (another
             candidate of the batch), "batch" (a candidate of a further batch, whose
             ``candidates`` these are), "none" (no candidate's first leg was free; the selected
-            one stays).
+            one stays); ``SparseStage`` adds "cold" (a warm re-plan's first leg crossed a wall:
+            drawn again from noise, whose selected first leg was free).
+        warm: the candidates were warm-started from the plan before (``warm_fraction``).
     """
 
     waypoints: np.ndarray
@@ -180,6 +182,7 @@ class SparsePlan:
     time_ms: float
     placed: int = 0
     first_leg: str = ""
+    warm: bool = False
 
 
 class SparseDiffusion:
@@ -288,7 +291,7 @@ class SparseDiffusion:
                              else (cands_np[best], 0))
         first_leg = ""
         if (densify and legs == 1 and cfg.leg_batches >= 0 and self.placer is not None
-                and self._leg_blocked(waypoints)):
+                and self.leg_blocked(waypoints)):
             found = self._free_first_leg(cands_np, col, best, start_t, goal_t, horizon,
                                          generator)
             first_leg = "none"
@@ -300,7 +303,7 @@ class SparseDiffusion:
             placed += more
         return SparsePlan(waypoints=waypoints, candidates=cands_np, best=best,
                           collision_costs=col, time_ms=(time.perf_counter() - t0) * 1e3,
-                          placed=placed, first_leg=first_leg)
+                          placed=placed, first_leg=first_leg, warm=warm_start is not None)
 
     @classmethod
     def for_map(cls, grid, footprint, config: SparseConfig | None = None, *, cost=None,
@@ -353,7 +356,7 @@ class SparseDiffusion:
             return waypoints, 0
         return self.placer(waypoints, legs=legs)
 
-    def _leg_blocked(self, waypoints: np.ndarray) -> bool:
+    def leg_blocked(self, waypoints: np.ndarray) -> bool:
         """Whether the first leg of ``waypoints`` (P, 2) [m] passes nearer a wall than the
         footprint fits (the placer's ``wall_length`` > 0)."""
         return bool(self.placer.leg_walls(waypoints[:2])[0] > 0)
@@ -392,7 +395,7 @@ class SparseDiffusion:
                 # the first leg depends on the first three waypoints only (placement scores a
                 # waypoint by its legs to both neighbours; repair bends the first leg alone)
                 head, _ = self._place(cands[k, :3], legs=1)
-                if not self._leg_blocked(head):
+                if not self.leg_blocked(head):
                     waypoints, placed = self._place(cands[k], legs=1)
                     return cands, col, k, waypoints, placed
         return None
