@@ -81,11 +81,14 @@ PARAMETERS = [
                                      "replan from the current pose (same horizon); doubles with "
                                      "each further such replan (at most 8x) until the robot "
                                      "progresses again; 0 = never"),
-    ParamSpec("warm_fraction", _SPARSE.warm_fraction, "sd, every_waypoint: a re-plan at a reached waypoint starts "
+    ParamSpec("warm_fraction", -1.0, "sd, every_waypoint: a re-plan at a reached waypoint starts "
                                     "from the rest of the current plan noised to the last F "
-                                    "(0..1) of SD's DDIM schedule; 0 = from noise (Algorithm 1 "
-                                    "as written; 0.3 took Algorithm 1 on maze2d-large from 177 "
-                                    "to 115 ms per problem, docs/RESULTS.md)"),
+                                    "(0..1) of SD's DDIM schedule, and one whose first leg "
+                                    "crosses a wall is drawn again from noise; 0 = from noise "
+                                    "(Algorithm 1 as written); -1 = by the map: 0.3 where "
+                                    "waypoint placement acts (building maps: offices' median "
+                                    "plan 2-3x faster, A* fallback 8% -> 0% for the circle "
+                                    "robot), else 0 (docs/RESULTS.md)"),
     ParamSpec("obstacle_memory", _ONLINE.obstacle_memory, "[s] obstacles the local costmap found are avoided "
                                        "by re-plans for this long unless seen gone"),
     ParamSpec("inference_precision", "auto", f"sd: the SD Transformer computes in one of "
@@ -131,8 +134,8 @@ class GlobalPlannerParams:
         require(bool(self.map_name), "map_name", self.map_name, "non-empty")
         require(self.replan in REPLAN_POLICIES, "replan", self.replan,
                 f"one of {list(REPLAN_POLICIES)}")
-        require(0.0 <= self.warm_fraction <= 1.0, "warm_fraction", self.warm_fraction,
-                "in 0..1 (0: off)")
+        require(0.0 <= self.warm_fraction <= 1.0 or self.warm_fraction == -1, "warm_fraction",
+                self.warm_fraction, "in 0..1 (0: off), or -1 (by the map)")
 
     def runner_config(self) -> GlobalRunnerConfig:
         """The GlobalRunner's settings (its replan spacing is decided per map by

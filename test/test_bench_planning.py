@@ -96,7 +96,12 @@ def test_warm_fraction_reaches_hd_and_is_reported():
         warm_fraction=0.3), progress=False)
     assert r.context["warm_fraction"] == 0.3 and len(r.cells) == 2
     assert "warm-started at 0.3 of the schedule" in format_markdown(r)
-    assert PlanningBenchSettings().warm_fraction == 0.0  # from noise unless asked
+    # by the map: warm on building maps (where placement acts), from noise on maze2d-large
+    assert PlanningBenchSettings().warm_fraction == -1.0
+    r = run_planning_benchmark(PlanningBenchSettings(
+        problems=1, robots=("quadruped",), methods=("hd",), ablation=False, safety_net=False,
+        guidance="on"), progress=False)
+    assert "warm-started by the map" in format_markdown(r)
 
 
 @pytest.mark.parametrize("guidance, want", [("on", [True]), ("off", [False])])

@@ -54,7 +54,8 @@ class GeneralBenchSettings:
     dd_model: str | None = "general"
     off: tuple[str, ...] = ()  # rules switched off (RULES_OFF)
     sd_steps: int | None = None  # SD's DDIM steps (None: the model's; the generalist's: 10)
-    warm_fraction: float = 0.0  # re-plans warm-started from the plan before (SparseConfig's)
+    # re-plans warm-started from the plan before (SparseConfig's; -1: by the map)
+    warm_fraction: float = -1.0
 
 
 @dataclass
@@ -172,7 +173,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="SD's DDIM steps (default: the model's; the generalist's 10)")
     parser.add_argument("--warm-fraction", type=float, default=d.warm_fraction, metavar="F",
                         help="SD's re-plans start from the rest of the plan before, noised to "
-                             "the last F (0..1) of the DDIM schedule; 0: from noise (the paper)")
+                             "the last F (0..1) of the DDIM schedule; 0: from noise (the "
+                             "paper); -1: by the map (0.3 on buildings)")
     parser.add_argument("--json", metavar="FILE", help="also write every cell as JSON")
     parser.add_argument("--md", metavar="FILE", help="also write the table as markdown")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")

@@ -96,7 +96,9 @@ class PlanningBenchSettings:
     replan: str = "every_waypoint"
     max_spacing: float | None = None  # [m] SparseConfig.max_spacing (None: off)
     place_reach: float | None = None  # [m] placement.placer_for (0: off; None: by map size)
-    warm_fraction: float = 0.0  # SparseConfig.warm_fraction: HD's warm-started re-plans (0: off)
+    # SparseConfig.warm_fraction: HD's warm-started re-plans (0: off; -1: by the map, building
+    # maps 0.3)
+    warm_fraction: float = -1.0
     replan_spacing: float | None = None  # [m] HierarchicalPlanner's (None: by the map; 0: off)
     precision: str = "fp32"  # the SD Transformer's inference precision (SparseConfig.precision)
     sd_steps: int | None = None  # SD's DDIM steps (SparseConfig.num_steps; None: the model's)
@@ -432,6 +434,8 @@ def _spacing_text(spacing) -> str:
 
 def format_markdown(r: PlanningBenchResult) -> str:
     """Table I layout (ours beside the paper's), the full per-cell table, and Table II."""
+    from ecahd_core.planning.sparse import AUTO_WARM_FRACTION
+
     c = r.context
     # the free-first-leg rule (and backtracking with it) acts with placement, every_waypoint
     leg_rule = bool(c.get("place_reach") and c.get("leg_batches", -1) >= 0
@@ -457,7 +461,9 @@ def format_markdown(r: PlanningBenchResult) -> str:
              f"keep the straight plan when DD is worse: {c.get('keep_better', False)}, "
              f"exact rule: {c.get('exact_rule', False)}, "
              f"SD replanning {c['replan']}"
-             + (f" warm-started at {c['warm_fraction']:g} of the schedule"
+             + ((" warm-started by the map (building maps at "
+                 f"{AUTO_WARM_FRACTION:g} of the schedule)" if c["warm_fraction"] == -1 else
+                 f" warm-started at {c['warm_fraction']:g} of the schedule")
                 if c.get("warm_fraction") and c["replan"] == "every_waypoint" else "")
              + (f", re-plans keep a waypoint per {_spacing_text(c['replan_spacing'])} left to "
                 "the goal" if c.get("replan_spacing") and c["replan"] == "every_waypoint" else "")

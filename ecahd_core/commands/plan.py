@@ -38,7 +38,7 @@ SWEEP_SPACING = 0.25  # [m] between footprint outlines drawn along the path
 
 
 def add_replan_argument(p: argparse.ArgumentParser, default: str = "every_waypoint",
-                        warm_fraction: float = 0.0) -> None:
+                        warm_fraction: float = -1.0) -> None:
     """``--replan``, ``--warm-fraction`` and ``--replan-spacing``: HD / ECAHD's SD policy
     (HierarchicalPlanner's ``replan`` and ``replan_spacing``, SparseConfig's ``warm_fraction``),
     one definition for ``ecahd plan`` and ``ecahd bench planning``."""
@@ -48,8 +48,9 @@ def add_replan_argument(p: argparse.ArgumentParser, default: str = "every_waypoi
                    help="HD: SD best-of-N at every waypoint (Algorithm 1) or once")
     p.add_argument("--warm-fraction", type=float, default=warm_fraction, metavar="F",
                    help="HD every_waypoint: warm-start each re-plan from the previous plan, "
-                        "running the last F (0..1) of the DDIM schedule (0: from noise, "
-                        "Algorithm 1 as written)")
+                        "running the last F (0..1) of the DDIM schedule, a re-plan whose first "
+                        "leg crosses a wall drawn again from noise (0: from noise, Algorithm 1 "
+                        "as written; -1: by the map, 0.3 on building maps, else 0)")
     p.add_argument("--replan-spacing", type=float, default=None, metavar="M",
                    help="[m] HD every_waypoint: each SD re-plan keeps at least ceil(D / M) + 1 "
                         "waypoints (at most P^g) for the straight distance D left to the goal, "

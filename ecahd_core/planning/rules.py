@@ -171,10 +171,12 @@ class SparseStage:
             horizon = self.horizon(iteration, S, G)
         # the free-first-leg rule and first-leg repair act on cold every_waypoint re-plans,
         # whose caller follows only the first leg; a forced plan is followed whole
-        first_leg_only = self.every_waypoint and not forced and sd.config.warm_fraction == 0
+        # (a warm-started re-plan has every leg repaired: the next warm start comes from them)
+        warm = sd.warm_start_for(S, previous, horizon) is not None
+        first_leg_only = self.every_waypoint and not forced and not warm
         sparse = sd.replan(S, G, previous, horizon=horizon, generator=generator,
                            repair_legs=1 if first_leg_only else None)
-        if (sparse.warm and self.every_waypoint and not forced and sd.placer is not None
+        if (warm and self.every_waypoint and not forced and sd.placer is not None
                 and sd.config.leg_batches >= 0 and sd.leg_blocked(sparse.waypoints)):
             # a warm re-plan whose first leg still crosses a wall after every leg's repair:
             # drawn again from noise, with the free-first-leg rule (the warm start's speed
