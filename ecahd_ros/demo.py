@@ -156,6 +156,12 @@ def add_obstacle_arguments(p: argparse.ArgumentParser) -> None:
                         "stays reachable for the footprint)")
     p.add_argument("--moving", type=int, default=0,
                    help="moving cylinders crossing each episode's route")
+    p.add_argument("--planner-param", action="append", default=[], metavar="NAME=VALUE",
+                   help="a global_planner parameter (repeatable), e.g. warm_fraction=0; the "
+                        "value is read as JSON where it parses (numbers, true/false), else "
+                        "as a string")
+    p.add_argument("--refiner-param", action="append", default=[], metavar="NAME=VALUE",
+                   help="a local_refiner parameter (repeatable), as --planner-param")
     p.add_argument("--first-episode", type=int, default=0, metavar="I",
                    help="start at seeded episode I (its start: goal I-1, its obstacles as in a "
                         "run from episode 0): rerun one episode of a long run alone")
@@ -506,6 +512,26 @@ def run_demo(config: DemoConfig) -> DemoResult:
                       goal_to_plan_ms=tuple(goal_to_plan), **paths)
 
 
+def parse_params(items, flag: str) -> dict:
+    """``NAME=VALUE`` strings -> {name: value}, each value read as JSON where it parses (1,
+    0.3, true) and as a string otherwise; EcahdError naming ``flag`` and the item if malformed."""
+    import json
+
+    from ecahd_core.errors import EcahdError
+
+    out = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        if not sep or not name.strip():
+            raise EcahdError(f"{flag} {item!r}: expected NAME=VALUE")
+        try:
+            value = json.loads(text)
+        except ValueError:
+            value = text
+        out[name.strip()] = value
+    return out
+
+
 def run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path("runs") / time.strftime("demo-%Y%m%d-%H%M%S")
     config = DemoConfig(out=out, episodes=args.episodes, robot=args.robot, map=args.map,
@@ -517,10 +543,12 @@ def run(args: argparse.Namespace) -> int:
                         models=Path(args.models) if args.models else None,
                         planner_params={"method": args.method,
                                         **({"lanes": str(Path(args.lanes).resolve())}
-                                           if args.lanes else {})},
+                                           if args.lanes else {}),
+                                        **parse_params(args.planner_param, "--planner-param")},
                         refiner_params={"dd_enabled": not args.no_dd,
                                         **({"lanes": str(Path(args.lanes).resolve())}
-                                           if args.lanes else {})})
+                                           if args.lanes else {}),
+                                        **parse_params(args.refiner_param, "--refiner-param")})
     result = run_demo(config)
     print(result.table)
     print(f"episodes: {result.wall_s:.1f} s wall, {result.sim_s:.1f} s sim time; bag "

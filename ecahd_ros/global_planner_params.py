@@ -87,7 +87,7 @@ PARAMETERS = [
                                     "crosses a wall is drawn again from noise; 0 = from noise "
                                     "(Algorithm 1 as written); -1 = by the map: 0.3 where "
                                     "waypoint placement acts (building maps: offices' median "
-                                    "plan 2-3x faster, A* fallback 8% -> 0% for the circle "
+                                    "plan 1.7-2.6x faster, A* fallback 8% -> 0% for the circle "
                                     "robot), else 0 (docs/RESULTS.md)"),
     ParamSpec("obstacle_memory", _ONLINE.obstacle_memory, "[s] obstacles the local costmap found are avoided "
                                        "by re-plans for this long unless seen gone"),

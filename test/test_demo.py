@@ -85,3 +85,24 @@ def test_refiner_control_timer_on_the_steady_clock_only_at_real_time(tmp_path, f
     override = DemoConfig(out=tmp_path, realtime_factor=factor,
                           refiner_params={"control_clock": "ros"})
     assert _node_parameters(override, START)["local_refiner"]["control_clock"] == "ros"
+
+
+def test_node_parameters_from_the_command_line_reach_the_nodes(tmp_path):
+    import argparse
+
+    from ecahd_core.errors import EcahdError
+    from ecahd_ros.demo import _node_parameters, add_arguments, parse_params
+
+    p = argparse.ArgumentParser()
+    add_arguments(p)
+    args = p.parse_args(["--planner-param", "warm_fraction=0", "--planner-param",
+                         "settle=false", "--refiner-param", "lanes=/x/lanes.npz"])
+    planner = parse_params(args.planner_param, "--planner-param")
+    assert planner == {"warm_fraction": 0, "settle": False}
+    assert parse_params(args.refiner_param, "--refiner-param") == {"lanes": "/x/lanes.npz"}
+    params = _node_parameters(DemoConfig(out=tmp_path, planner_params=planner), START)
+    assert params["global_planner"]["warm_fraction"] == 0
+    assert params["global_planner"]["settle"] is False
+    for bad in ("warm_fraction", "=0"):
+        with pytest.raises(EcahdError, match="--planner-param.*NAME=VALUE"):
+            parse_params([bad], "--planner-param")

@@ -29,9 +29,9 @@ GENERAL_SAMPLE_STEPS = 10  # DDIM steps of the generalist SD (the per-map SD's r
 # SparseConfig.warm_fraction -1 ("by the map"): where the placer and the free-first-leg rule act
 # (building maps), re-plans start warm from the plan before at this share of the schedule, and
 # one whose first leg still crosses a wall is drawn again from noise (rules.SparseStage). The
-# generalist on 9 held-out buildings, 396 plans (docs/RESULTS.md): offices' ECAHD alone 95.4% ->
-# 97.2% on average, A* fallback 8.3 / 0 / 0% -> 0%, medians 0.7-1.0 s -> 0.2-0.4 s; warehouses
-# and depots 100% both ways, medians 1.4-2.7x lower. Elsewhere (maze2d-large): 0, the paper's.
+# generalist on 9 held-out buildings, 324 plans (docs/RESULTS.md): offices' ECAHD alone 95.4% ->
+# 97.2% on average, A* fallback 8.3 / 0 / 0% -> 0%, medians 1.7-2.6x lower; warehouses and
+# depots 100% both ways, medians 1.2-2.9x lower. Elsewhere (maze2d-large): 0, the paper's.
 AUTO_WARM_FRACTION = 0.3
 SELECTION_RULES = ("shortest_reaching", "collision_aware")
 
