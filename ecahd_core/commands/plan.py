@@ -289,10 +289,12 @@ def _plan_diffusion(args, grid, footprint, start, goal):
                                      shortcut=not args.no_shortcut, model=args.dd_model)
     hd.plan(start, goal, generator=gen())  # warm-up
     plan = hd.plan(start, goal, generator=gen())
-    # footprint outlines where DD fired
+    # footprint outlines where DD fired; along the whole path where the shortcut rule pulled
+    # it taut (DD's local plans are then no longer all on it)
     refined = [seg for seg, used in zip(plan.segments, plan.dd_segments) if used]
-    dd_poses = (np.concatenate([densify(seg, step=0.15) for seg in refined])
-                if refined else np.zeros((0, 3)))
+    dd_poses = (None if plan.shortcut else
+                np.concatenate([densify(seg, step=0.15) for seg in refined]) if refined
+                else np.zeros((0, 3)))
     return (plan.trajectory, plan.global_plans[0], [], dict(plan.timings_ms), plan.dd_calls,
             dd_poses, plan.segments, hd, {"waypoints_placed": plan.placed,
                                           "exact_rule_segments": int(sum(plan.exact_kept)),
