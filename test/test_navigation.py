@@ -414,6 +414,47 @@ def two_corridor_map():
     return GridMap(data, 0.1, (0.0, 0.0), name="two-corridors")
 
 
+def test_the_detour_keeps_room_to_spare_round_corners_where_it_costs_little():
+    """A* hugs the footprint's clearance round a corner; the detour keeps DETOUR_SPARE more
+    where that path is at most SPARE_STRETCH times as long, and squeezes through a gap with
+    no room to spare when that is the only way."""
+    from ecahd_core.astar import clearance_for_footprint
+    from ecahd_core.footprint import make_footprint
+    from ecahd_core.maps import GridMap
+    from ecahd_core.planning.detour import DETOUR_SPARE, detour
+
+    robot = make_footprint("circle")
+    clearance = clearance_for_footprint(robot)
+    # a 10 x 6 m room at 0.05 m/cell with a 2 x 2 m pillar in the middle (x 4-6, y 2-4)
+    data = np.zeros((120, 200), dtype=np.int8)
+    data[:2], data[-2:], data[:, :2], data[:, -2:] = 100, 100, 100, 100
+    data[40:80, 80:120] = 100
+    room = GridMap(data, 0.05, (0.0, 0.0), name="pillar")
+    start, goal = np.array([2.0, 3.0]), np.array([8.0, 3.0])
+
+    def closest(path):  # the path's least distance to the pillar [m]
+        dense = np.concatenate([np.linspace(a, b, 50) for a, b in zip(path[:-1], path[1:])])
+        dx = np.maximum(np.maximum(4.0 - dense[:, 0], dense[:, 0] - 6.0), 0.0)
+        dy = np.maximum(np.maximum(2.0 - dense[:, 1], dense[:, 1] - 4.0), 0.0)
+        return float(np.hypot(dx, dy).min())
+
+    tight = detour(room, robot, start, goal, spare=0.0)
+    roomy = detour(room, robot, start, goal)
+    assert closest(tight) < clearance + 0.5 * DETOUR_SPARE
+    assert closest(roomy) >= clearance + DETOUR_SPARE - 0.01
+    length = lambda p: np.linalg.norm(np.diff(p, axis=0), axis=1).sum()  # noqa: E731
+    assert length(tight) < length(roomy) < 1.25 * length(tight)
+    # a gap just wide enough for the robot: no room to spare, the tight path through it
+    gate_data = np.zeros((40, 60), dtype=np.int8)
+    gate_data[:, 28:32] = 100
+    gap = int(np.ceil(2 * clearance / 0.1)) + 1  # cells
+    gate_data[20:20 + gap, 28:32] = 0
+    gate = GridMap(gate_data, 0.1, (0.0, 0.0), name="gate")
+    through = detour(gate, robot, np.array([1.0, 2.5]), np.array([5.0, 2.5]))
+    np.testing.assert_allclose(through, detour(gate, robot, np.array([1.0, 2.5]),
+                                               np.array([5.0, 2.5]), spare=0.0))
+
+
 def test_a_scanned_blockage_sends_the_detour_through_the_other_corridor():
     from ecahd_core.cost import CollisionCost
     from ecahd_core.footprint import make_footprint
