@@ -86,9 +86,9 @@ PARAMETERS = [
                                     "(0..1) of SD's DDIM schedule, and one whose first leg "
                                     "crosses a wall is drawn again from noise; 0 = from noise "
                                     "(Algorithm 1 as written); -1 = by the map: 0.3 where "
-                                    "waypoint placement acts (building maps: offices' median "
-                                    "plan 1.7-2.6x faster, A* fallback 8% -> 0% for the circle "
-                                    "robot), else 0 (docs/RESULTS.md)"),
+                                    "waypoint placement acts (building maps: median plans "
+                                    "1.2-2.3x faster, p95 1.9-4.1x, as collision-free), else 0 "
+                                    "(docs/RESULTS.md)"),
     ParamSpec("obstacle_memory", _ONLINE.obstacle_memory, "[s] obstacles the local costmap found are avoided "
                                        "by re-plans for this long unless seen gone"),
     ParamSpec("inference_precision", "auto", f"sd: the SD Transformer computes in one of "

@@ -30,8 +30,9 @@ GENERAL_SAMPLE_STEPS = 10  # DDIM steps of the generalist SD (the per-map SD's r
 # (building maps), re-plans start warm from the plan before at this share of the schedule, and
 # one whose first leg still crosses a wall is drawn again from noise (rules.SparseStage). The
 # generalist on 9 held-out buildings, 324 plans (docs/RESULTS.md): offices' ECAHD alone 95.4% ->
-# 97.2% on average, A* fallback 8.3 / 0 / 0% -> 0%, medians 1.7-2.6x lower; warehouses and
-# depots 100% both ways, medians 1.2-2.9x lower. Elsewhere (maze2d-large): 0, the paper's.
+# 96.3% on average, A* fallback 8.3 / 0 / 0% -> 5.6 / 0 / 0%, medians 1.2-2.1x lower;
+# warehouses and depots 100% both ways, medians 1.2-2.3x lower, p95 1.9-4.1x lower.
+# Elsewhere (maze2d-large): 0, the paper's.
 AUTO_WARM_FRACTION = 0.3
 SELECTION_RULES = ("shortest_reaching", "collision_aware")
 
