@@ -176,8 +176,7 @@ class SparseStage:
         first_leg_only = self.every_waypoint and not forced and not warm
         sparse = sd.replan(S, G, previous, horizon=horizon, generator=generator,
                            repair_legs=1 if first_leg_only else None)
-        if (warm and self.every_waypoint and not forced and sd.placer is not None
-                and sd.config.leg_batches >= 0 and sd.leg_blocked(sparse.waypoints)):
+        if warm and not forced and self.leg_rule(sd) and sd.leg_blocked(sparse.waypoints):
             # a warm re-plan whose first leg still crosses a wall after every leg's repair:
             # drawn again from noise, with the free-first-leg rule (the warm start's speed
             # where the plan before was right, the rule's choice where it was not)
