@@ -68,6 +68,7 @@ SLOWDOWN_PROFILES = ("linear", "step")
 _ESCAPE_V = (-1.0, -0.5, 0.0, 0.5, 1.0)  # escape commands' v as fractions of max_v
 _ESCAPE_W = (-0.5, 0.0, 0.5)  # ... and w as fractions of max_w
 _OWNER = "collision monitor"
+STATIC_STEP = 0.01  # [m] the static check samples a held command at most this far apart
 _STRAIGHT_W = 1e-9  # [rad/s] below this |w| the motion is integrated as a straight line
 
 
@@ -237,8 +238,6 @@ class CollisionMonitor:
         self._t_yield = np.arange(cfg.yield_steps + 1) * cfg.sim_dt  # (Ky+1,) [s]
         self._t_beat = np.arange(max(1, math.ceil(cfg.beat_horizon / cfg.sim_dt - 1e-9)) + 1
                                  ) * cfg.sim_dt  # (Kb+1,) [s]
-        self._t_static = np.arange(math.ceil(cfg.static_horizon / cfg.sim_dt - 1e-9)
-                                   + 1) * cfg.sim_dt  # (Ks+1,) [s]
         self._last_yield: tuple[float, float] | None = None  # its command (v, w)
 
     # ------------------------------------------------------------------------------ filter
@@ -284,7 +283,8 @@ class CollisionMonitor:
         held over ``horizon`` [s] (default ``static_horizon``; 0: not checked) must not bring
         the footprint into the map, nor deeper into it than now; else the robot turns on the
         spot if that is clear (the tracker's arc straightens as the heading error shrinks), or
-        stops. ``depths`` as for :meth:`filter`.
+        stops. The held motion is sampled every STATIC_STEP metres of the footprint's travel,
+        so a door's jamb is not passed between two samples. ``depths`` as for :meth:`filter`.
 
         Args:
             pose: (3,) x [m], y [m], yaw [rad].
@@ -296,22 +296,36 @@ class CollisionMonitor:
         horizon = self.config.static_horizon if horizon is None else horizon
         if horizon == 0 or (result.v == 0.0 and result.w == 0.0):
             return result
-        t = self._t_static if horizon == self.config.static_horizon else \
-            np.arange(math.ceil(horizon / self.config.sim_dt - 1e-9) + 1) * self.config.sim_dt
-        if self._static_ok(pose, result.v, result.w, depths, t):
+        pose = np.asarray(pose, dtype=np.float64).reshape(3)
+        v, w = float(result.v), float(result.w)
+        commands = [(v, w), (0.0, w)] if w != 0.0 and v != 0.0 else [(v, w)]
+        clear = self._static_clear(pose, commands, depths, self._static_times(horizon, v, w))
+        if clear[0]:
             return result
-        turn = 0.0 if result.w == 0.0 or not self._static_ok(pose, 0.0, result.w, depths, t) \
-            else result.w
+        turn = w if len(commands) > 1 and clear[1] else 0.0
         return MonitorResult(0.0, turn, "stop", result.min_time_to_collision,
-                             f"v={result.v:.2f} m/s, w={result.w:.2f} rad/s would touch the "
-                             f"static map within {horizon:g} s"
-                             + (": turning on the spot" if turn else ""))
+                             f"v={v:.2f} m/s, w={w:.2f} rad/s would touch the static map "
+                             f"within {horizon:g} s" + (": turning on the spot" if turn else ""))
 
-    def _static_ok(self, pose, v: float, w: float, depths, t: np.ndarray) -> bool:
-        """The motion at (v, w) over the times ``t`` (T,) [s] never goes deeper into the
-        static map than the robot is now, nor into it when it is clear now."""
-        d = np.asarray(depths(self.simulate(pose, v, w, t)), dtype=np.float64)
-        return bool(np.all(d[1:] <= max(float(d[0]), DEFAULT_TOLERANCE)))
+    def _static_times(self, horizon: float, v: float, w: float) -> np.ndarray:
+        """(T,) [s] sample times of a held command over ``horizon``: sim_dt apart, closer
+        where |v| + |w| r (r: circumscribed radius) moves the footprint more than STATIC_STEP
+        in sim_dt."""
+        speed = abs(v) + abs(w) * self.footprint.circumscribed_radius  # [m/s]
+        dt = min(self.config.sim_dt, STATIC_STEP / speed) if speed > 0 else self.config.sim_dt
+        n = max(1, math.ceil(horizon / dt - 1e-9))
+        return np.linspace(0.0, n * dt, n + 1)
+
+    def _static_clear(self, pose: np.ndarray, commands: list[tuple[float, float]], depths,
+                      t: np.ndarray) -> np.ndarray:
+        """(C,) bool: each command (v, w), held over the times ``t`` (T,) [s], never goes
+        deeper into the static map than the robot is now, nor into it when it is clear now
+        (one ``depths`` call for all)."""
+        poses = np.stack([self.simulate(pose, cv, cw, t)[1:] for cv, cw in commands])
+        d = np.asarray(depths(np.concatenate([pose[None], poses.reshape(-1, 3)])),
+                       dtype=np.float64)
+        return np.all(d[1:].reshape(len(commands), -1) <= max(float(d[0]), DEFAULT_TOLERANCE),
+                      axis=1)
 
     def _filter_points(self, pose, v: float, w: float, points, points_stamp, now: float,
                        velocities, bounds, depths) -> MonitorResult:

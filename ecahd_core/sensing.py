@@ -245,6 +245,13 @@ class StaticClearance:
 
         return wall_distance(self.grid, np.asarray(xy, dtype=np.float64).reshape(-1, 2))
 
+    def room(self, xy: np.ndarray, footprint) -> np.ndarray:
+        """(N, 2) [m] -> (N,) [m] room beside ``footprint`` at each point: the distance to the
+        nearest wall's edge (cell centres' distance less half a cell) less the footprint's
+        inscribed radius; <= 0 where it cannot stand in any heading. The local runner's precise
+        tracking reads it (``LocalRunner.room``)."""
+        return self.wall_distance(xy) - 0.5 * self.grid.resolution - footprint.inscribed_radius
+
 
 def shuttle_bounds(points: np.ndarray, velocities: np.ndarray, trail: np.ndarray,
                    trail_velocities: np.ndarray, trail_ages: np.ndarray, *,

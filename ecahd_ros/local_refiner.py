@@ -297,6 +297,8 @@ class LocalRefiner(ManagedNode):
             self._static = static
             self.runner.refine = refiner
             self.runner.can_turn = refiner.can_turn  # turning in place to the goal's heading
+            # precise tracking in tight places, by the static map (its distances are kept)
+            self.runner.room = partial(static.room, footprint=self.footprint)
             self.runner.reset_costs()  # the current plan's segments are refined on this map
         self.get_logger().info(f"map {grid.name!r} received; "
                                f"{'DD model and ' if p.dd_enabled else ''}cost J ready, "
@@ -563,7 +565,7 @@ class LocalRefiner(ManagedNode):
             "control_ms_p99": self._control_ms.quantile(0.99), "dd_calls": self.dd_calls,
             "monitor_stops": c["monitor_stop"], "monitor_slowdowns": c["monitor_slowdown"],
             "monitor_yields": c["monitor_yield"], "guard_stops": c["guard_stop"],
-            "scans": c["scans"],
+            "precise_ticks": self.runner.precise_ticks, "scans": c["scans"],
             "stamps_from_another_clock": self._stamps.mismatches,
             "stale_stamps": self._stamps.stale}
         mismatched = self._stamps.mismatches > self._mismatches_seen

@@ -49,6 +49,16 @@ PARAMETERS = [
                                  "dynamic)"),
     ParamSpec("waypoint_tolerance", 0.3, "[m] reaching a waypoint this close starts the next "
                                          "segment (dynamic)"),
+    ParamSpec("precise_room", 0.1, "[m] precise tracking: where the robot, or the waypoint it "
+                                   "heads for, has less room than this beside its footprint "
+                                   "(a door a little wider than the robot), pure pursuit uses "
+                                   "precise_lookahead and precise_waypoint_tolerance, so a "
+                                   "sharp turn before a tight door does not swing wide into "
+                                   "its jamb; 0 = off (dynamic)"),
+    ParamSpec("precise_lookahead", 0.1, "[m] pure pursuit's lookahead in tight places "
+                                        "(precise_room; dynamic)"),
+    ParamSpec("precise_waypoint_tolerance", 0.15, "[m] waypoint_tolerance in tight places "
+                                                  "(precise_room; dynamic)"),
     ParamSpec("goal_tolerance", 0.25, "[m] the goal (last plan point) counts as reached "
                                       "(dynamic)"),
     ParamSpec("stale_timeout", 1.0, "[s] odometry older than this stops the robot (dynamic)"),
@@ -117,6 +127,7 @@ PARAMETERS = [
 ]
 CONTROL_CLOCKS = ("steady", "ros")
 DYNAMIC = ("max_v", "max_w", "max_accel", "lookahead", "waypoint_tolerance", "goal_tolerance",
+           "precise_room", "precise_lookahead", "precise_waypoint_tolerance",
            "yaw_goal_tolerance", "stale_timeout", "plan_timeout")
 
 
@@ -127,11 +138,12 @@ class LocalRefinerParams:
     def __post_init__(self) -> None:
         require_positive(self, "control_rate", "max_v", "max_w", "max_accel", "lookahead",
                          "waypoint_tolerance", "goal_tolerance", "yaw_goal_tolerance",
+                         "precise_lookahead", "precise_waypoint_tolerance",
                          "stale_timeout", "torch_threads")
         require_cost_margin(self)
         require_non_negative(self, "c_th", "footprint_padding", "plan_timeout", "seed",
                              "transform_tolerance",
-                             "clearance_margin",
+                             "clearance_margin", "precise_room",
                              "polish_steps", "prepare_ahead", "obstacle_persistence",
                              "monitor_prediction_growth", "monitor_beat_horizon",
                              "static_guard_horizon")
@@ -158,7 +170,9 @@ class LocalRefinerParams:
             max_accel=self.max_accel, lookahead=self.lookahead,
             waypoint_tolerance=self.waypoint_tolerance, goal_tolerance=self.goal_tolerance,
             yaw_goal_tolerance=self.yaw_goal_tolerance, stale_timeout=self.stale_timeout, plan_timeout=self.plan_timeout,
-            prepare_ahead=self.prepare_ahead)
+            prepare_ahead=self.prepare_ahead, precise_room=self.precise_room,
+            precise_lookahead=self.precise_lookahead,
+            precise_tolerance=self.precise_waypoint_tolerance)
 
     def local_costmap_config(self):
         from ecahd_core.local_costmap import LocalCostmapConfig

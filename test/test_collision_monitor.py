@@ -10,7 +10,8 @@ import math
 import numpy as np
 import pytest
 
-from ecahd_core.collision_monitor import ACTIONS, CollisionMonitor, CollisionMonitorConfig
+from ecahd_core.collision_monitor import (ACTIONS, CollisionMonitor, CollisionMonitorConfig,
+                                         MonitorResult)
 from ecahd_core.errors import EcahdError
 from ecahd_core.footprint import make_footprint, polygon_footprint
 
@@ -361,6 +362,24 @@ def test_a_command_into_the_static_map_turns_the_robot_on_the_spot_instead():
                           depths=wall).action == "none"
     deeper = monitor.filter(inside, 0.2, 0.0, np.zeros((0, 2)), 0.0, 0.0, depths=wall)
     assert (deeper.v, deeper.w) == (0.0, 0.0)
+
+
+def test_the_static_check_does_not_pass_a_thin_obstacle_between_two_samples():
+    # a post the footprint touches only while x lies in (0.215, 0.235): at 0.5 m/s held for
+    # 0.5 s, samples sim_dt (0.1 s) apart land at x = 0, 0.05, ..., 0.25 and miss it; the
+    # static check samples every STATIC_STEP (1 cm) of travel and refuses the command
+    from ecahd_core.collision_monitor import STATIC_STEP
+
+    assert STATIC_STEP <= 0.01
+    post = lambda poses: np.where(np.abs(poses[:, 0] - 0.225) < 0.01, 0.002, -np.inf)  # noqa
+    monitor = CollisionMonitor(CIRCLE)
+    result = monitor.keep_off_map(ORIGIN, MonitorResult(0.5, 0.0, "none", math.inf, ""), post,
+                                  horizon=0.5)
+    assert (result.v, result.w, result.action) == (0.0, 0.0, "stop")
+    # beyond the horizon's reach (0.25 m) it does not matter
+    far = lambda poses: np.where(np.abs(poses[:, 0] - 0.3) < 0.01, 0.002, -np.inf)  # noqa
+    assert monitor.keep_off_map(ORIGIN, MonitorResult(0.5, 0.0, "none", math.inf, ""), far,
+                                horizon=0.5).action == "none"
 
 
 def test_predicted_offsets_fold_a_shuttling_point_back_and_forth():

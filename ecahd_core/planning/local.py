@@ -74,11 +74,20 @@ class LocalRunnerConfig:
     stale_timeout: float = 1.0  # [s]
     plan_timeout: float = 0.0  # [s], 0 = never
     prepare_ahead: int = 2  # segments refined ahead of the one being followed
+    # precise tracking: with less room than precise_room [m] beside the robot or at the
+    # waypoint it heads for (LocalRunner.room), pure pursuit uses precise_lookahead and the
+    # take-over waypoint_tolerance precise_tolerance (0 = off)
+    precise_room: float = 0.1  # [m]
+    precise_lookahead: float = 0.1  # [m]
+    precise_tolerance: float = 0.15  # [m]
 
     def __post_init__(self) -> None:
+        if not (math.isfinite(self.precise_room) and self.precise_room >= 0):
+            raise EcahdError(f"precise_room must be a finite number >= 0, got "
+                             f"{self.precise_room!r}")
         for name in ("control_period", "max_v", "max_w", "max_accel", "lookahead",
                      "waypoint_tolerance", "goal_tolerance", "yaw_goal_tolerance",
-                     "stale_timeout"):
+                     "stale_timeout", "precise_lookahead", "precise_tolerance"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise EcahdError(f"{name} must be a finite number > 0, got {value!r}")
@@ -162,6 +171,10 @@ class LocalRunner:
         self.waypoints_passed = 0  # plans' waypoints the robot had passed when they arrived
         # (x, y, yaw) -> the robot may turn in place there (None: always)
         self.can_turn: Callable[[tuple[float, float, float]], bool] | None = None
+        # (N, 2) [m] -> (N,) [m] room beside the footprint there (None: always room; precise
+        # tracking off)
+        self.room: Callable[[np.ndarray], np.ndarray] | None = None
+        self.precise_ticks = 0  # control ticks that tracked precisely
 
     # ----------------------------------------------------------------------------- inputs
     def set_pose(self, pose, now: float) -> None:
@@ -251,8 +264,9 @@ class LocalRunner:
         # take over the next segment: the first one of a new plan at once, a later one when
         # the robot reaches the waypoint the followed one ends at
         k = self._target
+        lookahead, tolerance = self._tracking(xy, k)
         due = (self.tracker is None or self.segment != k - 1 or k == 1
-               or np.linalg.norm(self.waypoints[k - 1] - xy) < c.waypoint_tolerance)
+               or np.linalg.norm(self.waypoints[k - 1] - xy) < tolerance)
         if k < len(self.waypoints) and due:
             result = self._result(k)
             if result is not None:
@@ -265,12 +279,28 @@ class LocalRunner:
                 self._submit_ahead()
         if self.tracker is None:
             return self._stop("waiting")
-        target, remaining = self.tracker.lookahead(xy, c.lookahead)
+        target, remaining = self.tracker.lookahead(xy, lookahead)
         if remaining < WAITING_END_DISTANCE and self.segment < len(self.waypoints) - 1:
             return self._stop("waiting")  # at the end of the followed plan, the next not ready
         v, w = pure_pursuit(self.pose, target, goal_distance, self.v, c.control_period, c)
         self.v = v
         return Command(v, w, "follow")
+
+    def _tracking(self, xy: np.ndarray, k: int) -> tuple[float, float]:
+        """(lookahead [m], take-over tolerance [m]) for this tick: the precise ones where the
+        robot or the waypoint W[k-1] it heads for has less than ``precise_room`` beside the
+        footprint. Pure pursuit with a 0.25 m lookahead that takes a segment over 0.3 m before
+        its waypoint swings 2-3 cm wide of a sharp turn: enough to graze the jamb of a door
+        5 cm wider than the robot (docs/RESULTS.md, closed loop)."""
+        c = self.config
+        if self.room is None or c.precise_room <= 0 or self.waypoints is None:
+            return c.lookahead, c.waypoint_tolerance
+        here = np.stack([xy, self.waypoints[min(max(k - 1, 0), len(self.waypoints) - 1)]])
+        if float(np.min(self.room(here))) >= c.precise_room:
+            return c.lookahead, c.waypoint_tolerance
+        self.precise_ticks += 1
+        return min(c.lookahead, c.precise_lookahead), min(c.waypoint_tolerance,
+                                                           c.precise_tolerance)
 
     def recheck(self, judge: Callable[[np.ndarray], bool]) -> int:
         """The world changed (a scan saw something): ``judge(plan (P, 2)) -> safe`` re-judges
