@@ -48,7 +48,8 @@ def test_polish_never_makes_a_path_worse_and_leaves_clear_paths_alone():
 
 
 @pytest.mark.parametrize("kwargs,name", [({"steps": -1}, "steps"), ({"step_size": 0.0}, "step_size"),
-                                         ({"clearance": -0.1}, "clearance")])
+                                         ({"clearance": -0.1}, "clearance"),
+                                         ({"patience": -2}, "patience")])
 def test_polish_config_names_bad_values(kwargs, name):
     with pytest.raises(EcahdError, match=name):
         PolishConfig(**kwargs)
@@ -77,3 +78,39 @@ def test_polish_moves_points_across_the_path_only(across):
         assert back < 0.01 and np.all(np.diff(s) > 0)
     else:
         assert back > 0.05
+
+
+def test_patience_stops_a_path_whose_cost_no_longer_falls(monkeypatch):
+    """The corridor x in [1, 3], y in [1, 2] of maze2d-large leaves the circle 0.1 m a side,
+    so a clearance of 0.3 m is never reached and every step would run: with ``patience`` a
+    path stops once ``patience`` steps in a row lowered its best J by less than 1%, at a cost
+    within 1% of what all the steps reach."""
+    import ecahd_core.cost as cost_module
+
+    calls = []
+    real = cost_module.trajectory_cost
+
+    def counting(*args, **kwargs):
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(cost_module, "trajectory_cost", counting)
+    fixed = torch.tensor([True, False, False, True])
+    _, full = polish_paths(OFF_CENTRE, fixed, CMAP, FP.points, CC,
+                           PolishConfig(steps=200, clearance=0.3))
+    assert len(calls) == 201
+    calls.clear()
+    _, early = polish_paths(OFF_CENTRE, fixed, CMAP, FP.points, CC,
+                            PolishConfig(steps=200, clearance=0.3, patience=3))
+    assert len(calls) < 60
+    assert float(early[0]) <= 1.01 * float(full[0]) + 1e-6
+
+
+def test_patience_by_the_map_is_on_for_wide_margins_only():
+    from ecahd_core.polish import WIDE_MARGIN, WIDE_MARGIN_PATIENCE
+
+    by_map = PolishConfig()
+    assert by_map.patience_for(0.1) == 0  # maze2d's cost map: every step
+    assert by_map.patience_for(WIDE_MARGIN) == WIDE_MARGIN_PATIENCE == 3  # buildings
+    assert PolishConfig(patience=0).patience_for(0.5) == 0
+    assert PolishConfig(patience=5).patience_for(0.1) == 5
