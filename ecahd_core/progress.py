@@ -32,6 +32,8 @@ SNAP_REACH = 0.5
 # replan spacing that a straight leg reaches (route_sight), kept if its first leg is free and gains
 # SUBGOAL_GAIN [m] on the other's
 SUBGOAL_TRIGGER = 0.5
+ROUNDABOUT = 1.5  # ... and acts from a goal's first plan where its route is this much longer than the
+#   straight line, which is not free (SubgoalRule.roundabout)
 SUBGOAL_REACH = 1.0
 SUBGOAL_GAIN = 0.1
 
@@ -182,6 +184,20 @@ class SubgoalRule:
                 times["goal_field"] = (times.get("goal_field", 0.0)
                                        + (time.perf_counter() - t0) * 1e3)
         return self._to_go[1]
+
+    def roundabout(self, sd, start, goal, times: dict | None = None) -> bool:
+        """Whether ``goal`` (2,) [m] lies behind walls from ``start`` (2,) [m]: the straight
+        leg between them is not free by the placer's leg test and the goal's cost-to-go from
+        ``start`` is more than ROUNDABOUT times their distance. SD reads the map but aims
+        through it there (a 9 m problem whose route is 42 m spent 9 re-plans in a dead end
+        before the rule acted, docs/rules.md)."""
+        S = np.asarray(start, dtype=np.float64).reshape(2)
+        G = np.asarray(goal, dtype=np.float64).reshape(2)
+        straight = float(np.linalg.norm(G - S))
+        if straight < 1e-9 or not sd.leg_blocked(np.stack([S, G])):
+            return False
+        to_go = self.cost_to_go(G, times)
+        return to_go is not None and float(to_go(S[None])[0]) > ROUNDABOUT * straight
 
     def apply(self, sd, start, goal, sparse, iteration: int, *, generator=None,
               times: dict | None = None):

@@ -102,6 +102,10 @@ def test_the_subgoal_rule_replaces_a_first_leg_that_makes_no_progress_by_one_tha
     assert to_go(w[1:2])[0] < to_go(S[None])[0] - SUBGOAL_GAIN
     # a plan whose first leg already makes progress stays as it is
     assert rule.apply(hd.sparse, S, G, out, 20, generator=gen, times=times) is out
+    # S and G either side of the wall, the route over 3x the straight line: roundabout, so
+    # the rule acts from the goal's first plan; a free straight leg never is
+    assert rule.roundabout(hd.sparse, S, G)
+    assert not rule.roundabout(hd.sparse, S, S + 0.05 * (G - S) / np.linalg.norm(G - S))
 
 
 

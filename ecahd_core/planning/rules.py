@@ -85,6 +85,7 @@ class SparseStage:
         self.subgoals = bool(subgoals)
         self.settle = bool(settle)
         self._subgoal_rule = None  # progress.SubgoalRule on the static placer's map, built once
+        self._roundabout_goal, self._roundabout_value = None, False  # the last goal's verdict
         # the lanes learnt from demonstrations (ecahd_core.lanes.WaypointLanes) or None: every
         # plan's interior waypoints are moved onto them before they are followed
         self.lanes = None
@@ -126,6 +127,15 @@ class SparseStage:
             MAX_EXTRA_ITERATIONS
 
     # -------------------------------------------------------------------------------- step
+    def _roundabout(self, sd, S: np.ndarray, G: np.ndarray, times: dict | None) -> bool:
+        """The goal G lies behind walls from S (SubgoalRule.roundabout), judged once per
+        start of a goal's plans: from the robot's pose when the goal came."""
+        key = (tuple(G.tolist()))
+        if self._roundabout_goal != key:
+            self._roundabout_goal = key
+            self._roundabout_value = self.subgoal_rule().roundabout(sd, S, G, times)
+        return self._roundabout_value
+
     def subgoal_rule(self):
         """The SubgoalRule on the static placer's map and footprint (built on first use; call
         it when a map arrives so the cost-to-go's graph is not built during a re-plan)."""
@@ -182,8 +192,9 @@ class SparseStage:
             # where the plan before was right, the rule's choice where it was not)
             sparse = sd.plan(S, G, horizon=horizon, generator=generator, repair_legs=1)
             sparse = replace(sparse, first_leg=sparse.first_leg or "cold")
-        if (self.every_waypoint and not forced and iteration >= sd.config.horizon - 1
-                and self.subgoaling(sd)):  # beyond where Algorithm 1 would have reached G
+        if (self.every_waypoint and not forced and self.subgoaling(sd)
+                and (iteration >= sd.config.horizon - 1  # beyond where Algorithm 1 reaches G
+                     or self._roundabout(sd, S, G, times))):
             sparse = self.subgoal_rule().apply(sd, S, G, sparse, iteration,
                                                generator=generator, times=times)
         wp = sparse.waypoints if self.lanes is None else self.lanes(sparse.waypoints)
