@@ -366,14 +366,15 @@ def headings(xy: np.ndarray) -> np.ndarray:
 
 
 def placer_for(grid, footprint, reach: float | None = None, *,
-               leg_rounds: int = LEG_ROUNDS) -> WaypointPlacer | None:
+               leg_rounds: int = LEG_ROUNDS, general: bool = False) -> WaypointPlacer | None:
     """The SparseDiffusion ``placer`` the commands use: ``reach`` [m] > 0 places within it, 0
     turns placement off (SD's waypoints as sampled, the paper), None chooses by the map: on
     (PLACE_REACH) for maps over ``astar.COARSE_ABOVE_CELLS`` cells, the building maps where
     SD's waypoint error exceeds a wall's thickness; off on smaller maps such as maze2d-large,
-    whose tables keep the paper's setting."""
+    whose tables keep the paper's setting, unless SD is the map-conditioned generalist
+    (``general``; :func:`auto_reach`)."""
     if reach is None:
-        reach = auto_reach(grid)
+        reach = auto_reach(grid, general=general)
     if reach < 0 or not math.isfinite(reach):
         raise EcahdError(f"the waypoint placement's reach must be >= 0 m (0: off), got {reach}")
     if reach == 0:
@@ -381,9 +382,11 @@ def placer_for(grid, footprint, reach: float | None = None, *,
     return WaypointPlacer(grid, footprint, reach=reach, leg_rounds=leg_rounds)
 
 
-def auto_reach(grid) -> float:
-    """[m] the placement ``reach`` chosen by the map: PLACE_REACH on maps over
-    ``astar.COARSE_ABOVE_CELLS`` cells, 0 (off) on smaller ones."""
+def auto_reach(grid, *, general: bool = False) -> float:
+    """[m] the placement ``reach`` chosen by the map and the SD model: PLACE_REACH on maps over
+    ``astar.COARSE_ABOVE_CELLS`` cells and, for the map-conditioned generalist (``general``),
+    on any map; 0 (off) on smaller maps with a per-map model (maze2d's tables keep the
+    paper's setting)."""
     from ecahd_core.astar import COARSE_ABOVE_CELLS
 
-    return PLACE_REACH if grid.width * grid.height > COARSE_ABOVE_CELLS else 0.0
+    return PLACE_REACH if general or grid.width * grid.height > COARSE_ABOVE_CELLS else 0.0

@@ -489,10 +489,16 @@ def test_the_subgoal_rule_is_built_with_the_map_and_acts_past_p_g_minus_one_wayp
     real = rule.apply
     rule.apply = lambda sd, s, g, plan, it, **k: seen.append(it) or real(sd, s, g, plan, it, **k)
     r.planner.runner.set_goal(GOAL)
-    for it in (8, 9, 12):
-        r.planner.planning._plan(PlanRequest(np.array(ROBOT), np.array(GOAL), 10, "waypoint",
-                                             it))
-    assert seen == [9, 12]
+    stage = r.planner.planning.stage
+    for roundabout, expected in ((False, [9, 12]), (True, [8, 9, 12])):
+        # a goal round the walls (its route > 1.5x the blocked straight line): from the first
+        # plan on; else past P^g - 1
+        stage._roundabout = lambda sd, S, G, times, v=roundabout: v
+        seen.clear()
+        for it in (8, 9, 12):
+            r.planner.planning._plan(PlanRequest(np.array(ROBOT), np.array(GOAL), 10,
+                                                 "waypoint", it))
+        assert seen == expected
 
 
 def test_a_plan_toward_a_subgoal_is_followed_to_the_subgoal_when_its_legs_there_are_free(rig):

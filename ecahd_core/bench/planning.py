@@ -260,8 +260,10 @@ def run_planning_benchmark(settings: PlanningBenchSettings, *, progress: bool = 
     from ecahd_core.safety import SafetyNet, SafetyNetConfig
 
     grid = load_bench_map(settings.map)
-    place_reach = (auto_reach(grid) if settings.place_reach is None  # what "auto" chose
-                   else settings.place_reach)
+    from ecahd_core.model_zoo import is_general
+
+    place_reach = (auto_reach(grid, general=is_general("sd", settings.sd_model, grid.name))
+                   if settings.place_reach is None else settings.place_reach)  # what "auto" chose
     margin = CostConfig.for_map(grid, margin=settings.margin).margin
     spacings = {}  # robot -> the re-plan spacing its ECAHD cells used [m] (None: off)
     problems = make_problems(grid, settings.problems, seed=settings.seed)

@@ -174,7 +174,8 @@ class HierarchicalPlanner(DenseStage):
                    costmap=sd.cost.costmap, footprint_points=sd.cost.footprint_points,
                    cost_config=sd.cost.config,
                    dense=dense, device=device, replan=replan,
-                   replan_spacing=replan_spacing_for(grid, replan_spacing, sd.expert_spacing),
+                   replan_spacing=replan_spacing_for(grid, replan_spacing, sd.expert_spacing,
+                                                     general=sd.general),
                    exact_check=exact_check_for(grid, footprint) if exact else None,
                    backtracks=backtracks, subgoals=subgoals, settle=settle,
                    shortcut=shortcut)

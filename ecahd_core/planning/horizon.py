@@ -19,29 +19,34 @@ MAX_EXTRA_ITERATIONS = 30
 SNAP_DISTANCE = 0.2  # [m] a goal in collision moves at most this far (< waypoint_tolerance)
 
 
-def auto_replan_spacing(grid, expert_spacing: float | None = None) -> float | None:
+def auto_replan_spacing(grid, expert_spacing: float | None = None, *,
+                        general: bool = False) -> float | None:
     """[m] the replan spacing (:func:`replan_horizon`) chosen by the map and the SD model: on
-    maps over ``astar.COARSE_ABOVE_CELLS`` cells (buildings) the model's ``expert_spacing``
+    maps over ``astar.COARSE_ABOVE_CELLS`` cells (buildings), and on any map for the
+    map-conditioned generalist (``general``), the model's ``expert_spacing``
     (``SparseDiffusion.expert_spacing``, the median spacing of the waypoints it learnt), at
-    least REPLAN_SPACING; None (Algorithm 1's P^g - p) on smaller maps, so maze2d-large keeps
-    the paper's rule.
+    least REPLAN_SPACING; None (Algorithm 1's P^g - p) on smaller maps with a per-map model,
+    so maze2d-large's own models keep the paper's rule. (The generalist on maze2d-large, 12
+    problems: 50 / 50 / 58.3% alone with the paper's rule and no placement, 100% with both
+    rules, docs/rules.md.)
 
     Measured (docs/RESULTS.md): 3 m fits the warehouses (expert spacing 2.6-2.7 m); on the
     60 x 60 m office (6.5 m) 3 m asked for twice the waypoints SD learnt and 6.5 m beat it on
     ECAHD alone, fallbacks and time."""
     from ecahd_core.astar import COARSE_ABOVE_CELLS
 
-    if grid.width * grid.height <= COARSE_ABOVE_CELLS:
+    if grid.width * grid.height <= COARSE_ABOVE_CELLS and not general:
         return None
     return max(REPLAN_SPACING, expert_spacing or 0.0)
 
 
 def replan_spacing_for(grid, value: float | None,
-                       expert_spacing: float | None = None) -> float | None:
+                       expert_spacing: float | None = None, *,
+                       general: bool = False) -> float | None:
     """A replan-spacing setting [m] as the commands take it: None by the map and the model
     (:func:`auto_replan_spacing`), 0 off, else ``value``."""
     if value is None:
-        return auto_replan_spacing(grid, expert_spacing)
+        return auto_replan_spacing(grid, expert_spacing, general=general)
     if not (math.isfinite(value) and value >= 0):
         raise EcahdError(f"replan spacing must be >= 0 m (0: off), got {value}")
     return value or None

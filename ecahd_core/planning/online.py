@@ -274,12 +274,13 @@ class OnlinePlannerConfig:
             raise EcahdError(f"replan_spacing must be >= 0 m or -1 (by the map), got "
                              f"{self.replan_spacing}")
 
-    def spacing_on(self, grid, expert_spacing: float | None = None) -> float | None:
+    def spacing_on(self, grid, expert_spacing: float | None = None, *,
+                   general: bool = False) -> float | None:
         """[m] the re-plans' spacing on ``grid`` for an SD model whose expert waypoints lie
         ``expert_spacing`` [m] apart (``replan_spacing`` -1: by both,
         :func:`~ecahd_core.planning.horizon.auto_replan_spacing`; 0: None, off)."""
         return replan_spacing_for(grid, None if self.replan_spacing == -1
-                                  else self.replan_spacing, expert_spacing)
+                                  else self.replan_spacing, expert_spacing, general=general)
 
 
 @dataclass(frozen=True)
@@ -375,10 +376,12 @@ class OnlinePlanner:
         if learnt is not None and learnt is not grid:
             self.memory.learnt_from(learnt)
         self.astar, self.fd, self.stage = astar, fd, None
-        spacing = c.spacing_on(grid, sd.expert_spacing) if sd is not None else None
+        spacing = (c.spacing_on(grid, sd.expert_spacing, general=sd.general)
+                   if sd is not None else None)
         self.runner.config = replace(self.runner.config, replan_spacing=spacing)
         if sd is not None:
-            self._reach = auto_reach(grid) if c.place_reach < 0 else c.place_reach
+            self._reach = (auto_reach(grid, general=sd.general) if c.place_reach < 0
+                           else c.place_reach)
             placer = self._placer(grid, "place") if self.placement_on else None
             self.stage = SparseStage(sd.on(placer=placer), replan=self.runner.config.replan,
                                      replan_spacing=spacing, subgoals=c.subgoals,

@@ -324,7 +324,8 @@ class SparseDiffusion:
         model (``model``: a checkpoint path, per-map or generalist; "general": the shipped
         generalist; None: the map's shipped one or one on $ECAHD_MODELS),
         J's ``cost`` (a CollisionCost; None: built with the map's margin) and the placer of
-        ``place_reach`` [m] (None: by the map, ``placement.placer_for``; 0: off)."""
+        ``place_reach`` [m] (None: by the map and the model, ``placement.placer_for``; 0:
+        off)."""
         from ecahd_core.cost import CollisionCost
         from ecahd_core.model_zoo import load_sd
         from ecahd_core.placement import placer_for
@@ -334,8 +335,11 @@ class SparseDiffusion:
             cost = CollisionCost.build(grid, footprint)
         ckpt = load_sd(grid, path=model, footprint=footprint, horizon=config.horizon,
                        device=device)
+        from ecahd_core.general.checkpoint import GeneralCheckpoint
+
         return cls(ckpt, config, cost=cost, device=device,
-                   placer=placer_for(grid, footprint, place_reach), grid=grid)
+                   placer=placer_for(grid, footprint, place_reach,
+                                     general=isinstance(ckpt, GeneralCheckpoint)), grid=grid)
 
     def on(self, *, cost=None, placer=None) -> "SparseDiffusion":
         """A view of this SD (the same model, sampler and settings) that weighs candidates by
