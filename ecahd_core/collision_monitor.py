@@ -296,13 +296,11 @@ class CollisionMonitor:
         horizon = self.config.static_horizon if horizon is None else horizon
         if horizon == 0 or (result.v == 0.0 and result.w == 0.0):
             return result
-        pose = np.asarray(pose, dtype=np.float64).reshape(3)
         v, w = float(result.v), float(result.w)
-        commands = [(v, w), (0.0, w)] if w != 0.0 and v != 0.0 else [(v, w)]
-        clear = self._static_clear(pose, commands, depths, self._static_times(horizon, v, w))
-        if clear[0]:
+        t = self._static_times(horizon, v, w)
+        if self._static_ok(pose, v, w, depths, t):
             return result
-        turn = w if len(commands) > 1 and clear[1] else 0.0
+        turn = w if w != 0.0 and v != 0.0 and self._static_ok(pose, 0.0, w, depths, t) else 0.0
         return MonitorResult(0.0, turn, "stop", result.min_time_to_collision,
                              f"v={v:.2f} m/s, w={w:.2f} rad/s would touch the static map "
                              f"within {horizon:g} s" + (": turning on the spot" if turn else ""))
@@ -316,16 +314,11 @@ class CollisionMonitor:
         n = max(1, math.ceil(horizon / dt - 1e-9))
         return np.linspace(0.0, n * dt, n + 1)
 
-    def _static_clear(self, pose: np.ndarray, commands: list[tuple[float, float]], depths,
-                      t: np.ndarray) -> np.ndarray:
-        """(C,) bool: each command (v, w), held over the times ``t`` (T,) [s], never goes
-        deeper into the static map than the robot is now, nor into it when it is clear now
-        (one ``depths`` call for all)."""
-        poses = np.stack([self.simulate(pose, cv, cw, t)[1:] for cv, cw in commands])
-        d = np.asarray(depths(np.concatenate([pose[None], poses.reshape(-1, 3)])),
-                       dtype=np.float64)
-        return np.all(d[1:].reshape(len(commands), -1) <= max(float(d[0]), DEFAULT_TOLERANCE),
-                      axis=1)
+    def _static_ok(self, pose, v: float, w: float, depths, t: np.ndarray) -> bool:
+        """The motion at (v, w) over the times ``t`` (T,) [s] never goes deeper into the
+        static map than the robot is now, nor into it when it is clear now."""
+        d = np.asarray(depths(self.simulate(pose, v, w, t)), dtype=np.float64)
+        return bool(np.all(d[1:] <= max(float(d[0]), DEFAULT_TOLERANCE)))
 
     def _filter_points(self, pose, v: float, w: float, points, points_stamp, now: float,
                        velocities, bounds, depths) -> MonitorResult:

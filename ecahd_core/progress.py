@@ -32,8 +32,9 @@ SNAP_REACH = 0.5
 # replan spacing that a straight leg reaches (route_sight), kept if its first leg is free and gains
 # SUBGOAL_GAIN [m] on the other's
 SUBGOAL_TRIGGER = 0.5
-ROUNDABOUT = 1.5  # ... and acts from a goal's first plan where its route is this much longer than the
-#   straight line, which is not free (SubgoalRule.roundabout)
+# ... and acts from a goal's first plan where its route is ROUNDABOUT x the straight line,
+# which is not free (SubgoalRule.roundabout)
+ROUNDABOUT = 1.5
 SUBGOAL_REACH = 1.0
 SUBGOAL_GAIN = 0.1
 

@@ -130,7 +130,7 @@ class SparseStage:
     def _roundabout(self, sd, S: np.ndarray, G: np.ndarray, times: dict | None) -> bool:
         """The goal G lies behind walls from S (SubgoalRule.roundabout), judged once per
         start of a goal's plans: from the robot's pose when the goal came."""
-        key = (tuple(G.tolist()))
+        key = tuple(G.tolist())
         if self._roundabout_goal != key:
             self._roundabout_goal = key
             self._roundabout_value = self.subgoal_rule().roundabout(sd, S, G, times)
