@@ -162,6 +162,8 @@ def test_bench_general_rows_per_family_and_robot():
     assert row["alone"] == 100 * np.mean(cell["free_by_problem"])
     assert row["net"] == 100 * np.mean(cell["net_free_by_problem"])
     assert len(cell["length_ratio_by_problem"]) == 2 and row["length_median"] > 0.9
+    assert len(cell["room_by_problem"]) == 2
+    assert row["room_median"] == np.median(cell["room_by_problem"]) and row["room_p5"] > 0
     assert "| maze2d-large | circle | 1 | 2 |" in format_table(result)
 
 
@@ -183,3 +185,22 @@ def test_bench_general_sd_steps_reach_the_sampler(monkeypatch):
         sd_steps=4), progress=False)
     assert seen and set(seen) == {4}
     assert "SD 4 DDIM steps" in format_table(result)
+
+
+def test_least_room_is_the_narrowest_gap_along_the_legs_not_only_at_the_points():
+    """A path whose two points lie 0.5 m from the nearest wall (the map's edge) but whose leg
+    passes the end of a wall 0.3 m away: the room is read along the leg, exactly (0.3 m less the
+    robot's radius, to the 1 cm sampling)."""
+    from ecahd_core.bench.planning import least_room
+    from ecahd_core.footprint import make_footprint
+    from ecahd_core.maps import GridMap
+
+    occ = np.zeros((60, 60), dtype=np.int8)  # 3 x 3 m at 0.05 m, origin (0, 0)
+    occ[40:, 29:31] = 100  # a wall from the top down to y = 2.0 m, x in [1.45, 1.55]
+    grid = GridMap(data=occ, resolution=0.05)
+    fp = make_footprint("circle")
+    path = np.array([[0.5, 1.7], [2.5, 1.7]])  # passes 0.3 m under the wall's end
+    room = least_room(path, fp, grid)
+    ends = least_room(path[:1], fp, grid)
+    assert ends == pytest.approx(0.5 - fp.inscribed_radius, abs=1e-9)
+    assert room == pytest.approx(0.3 - fp.inscribed_radius, abs=1e-6)

@@ -9,7 +9,9 @@ shipped generalists, zero-shot). Rows are per family and robot, over all its map
 - ECAHD alone: collision-free by the exact checker before the net;
 - with the net: collision-free after it; A* fallback: plans where the net spliced in A*;
 - the time of a plan with the net (median, p95) [ms];
-- the plans' length over A*'s (median, p99; ECAHD alone).
+- the plans' length over A*'s (median, p99; ECAHD alone);
+- the least room beside the footprint along each plan (ECAHD alone; median, 5th percentile)
+  [cm]: the margin the robot has for tracking error (``planning.least_room``).
 
 A* (with the footprint's clearance) is the reference of every length, computed in the same run
 on the same problems. Run it: ``ecahd bench general [--maps SPEC ...] [--sd-model CKPT]``.
@@ -122,6 +124,8 @@ def rows(result: GeneralBenchResult) -> list[dict]:
             rules = sum((c["net_rule_by_problem"] for c in cells), [])
             times = np.concatenate([c["net_time_ms_by_problem"] for c in cells])
             ratio = np.concatenate([c["length_ratio_by_problem"] for c in cells])
+            room = np.concatenate([c.get("room_by_problem") or [np.nan] * c["problems"]
+                                   for c in cells])
             out.append({"family": family, "robot": robot, "maps": len(cells),
                         "problems": len(free), "alone": 100 * free.mean(),
                         "net": 100 * net.mean(),
@@ -130,7 +134,9 @@ def rows(result: GeneralBenchResult) -> list[dict]:
                         "time_median": float(np.median(times)),
                         "time_p95": float(np.percentile(times, 95)),
                         "length_median": float(np.median(ratio)),
-                        "length_p99": float(np.percentile(ratio, 99))})
+                        "length_p99": float(np.percentile(ratio, 99)),
+                        "room_median": float(np.median(room)),
+                        "room_p5": float(np.percentile(room, 5))})
     return out
 
 
@@ -142,13 +148,15 @@ def format_table(result: GeneralBenchResult) -> str:
              + (f"SD {s.sd_steps} DDIM steps, " if s.sd_steps else "")
              + f"{result.seconds / 60:.1f} min", "",
              "| family | robot | maps | problems | ECAHD alone % | with the net % | A* fallback "
-             "% | unsafe % | median ms | p95 ms | length / A* median | p99 |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "% | unsafe % | median ms | p95 ms | length / A* median | p99 | least room cm "
+             "median | p5 |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows(result):
         lines.append(f"| {r['family']} | {r['robot']} | {r['maps']} | {r['problems']} | "
                      f"{r['alone']:.1f} | {r['net']:.1f} | {r['fallback']:.1f} | "
                      f"{r['unsafe']:.1f} | {r['time_median']:.0f} | {r['time_p95']:.0f} | "
-                     f"{r['length_median']:.2f} | {r['length_p99']:.2f} |")
+                     f"{r['length_median']:.2f} | {r['length_p99']:.2f} | "
+                     f"{100 * r['room_median']:.1f} | {100 * r['room_p5']:.1f} |")
     return "\n".join(lines)
 
 

@@ -156,6 +156,7 @@ class CellResult:
     free_by_problem: list = field(default_factory=list)
     time_ms_by_problem: list = field(default_factory=list)
     length_ratio_by_problem: list = field(default_factory=list)  # path length / A*'s
+    room_by_problem: list = field(default_factory=list)  # [m] least room (least_room)
     # with the net: collision-free and the rule that acted last, per problem (None: no net)
     net_free_by_problem: list | None = None
     net_rule_by_problem: list | None = None
@@ -183,13 +184,52 @@ class PathJudgement:
     """How plans did on their problems, each (n,): ``success`` (a point within SUCCESS_RADIUS
     of the goal), ``final`` (the last point within FINAL_RADIUS), ``free`` (collision-free by
     the exact checker), ``penetration`` (its share of poses in contact), ``ratio`` (length
-    over the problem's A* length)."""
+    over the problem's A* length), ``room`` [m] (the least room beside the footprint along the
+    path, :func:`least_room`)."""
 
     success: np.ndarray
     final: np.ndarray
     free: np.ndarray
     penetration: np.ndarray
     ratio: np.ndarray
+    room: np.ndarray
+
+
+ROOM_STEP = 0.01  # [m] least_room samples a path this finely
+
+
+def least_room(path, footprint, grid) -> float:
+    """The least room [m] beside ``footprint`` along ``path`` (N, 2) [m]: over points every
+    ROOM_STEP along its legs, the exact distance to the nearest occupied cell's square (off the
+    map counts as occupied) less the footprint's inscribed radius: the room a robot has beside
+    it in any heading, its margin for tracking error (<= 0 where the inscribed circle touches a
+    wall, which for a non-round footprint need not be a collision)."""
+    from ecahd_core.collision import wall_distance
+
+    path = np.asarray(path, dtype=np.float64).reshape(-1, 2)
+    legs = np.diff(path, axis=0)
+    n = np.maximum(1, np.ceil(np.linalg.norm(legs, axis=1) / ROOM_STEP).astype(int))
+    pts = np.concatenate([path[:1]] + [path[i] + legs[i] * (np.arange(1, k + 1) / k)[:, None]
+                                       for i, k in enumerate(n)])
+    res, h = grid.resolution, 0.5 * grid.resolution
+    # the distance field (cell centre to cell centre) is within a cell of the exact distance:
+    # only points within two cells of its least value can hold the least exact distance
+    approx = wall_distance(grid, pts)
+    pts, approx = pts[approx <= approx.min() + 2 * res], approx[approx <= approx.min() + 2 * res]
+    occ = np.pad(grid.occupied, 1, constant_values=True)  # (H + 2, W + 2): the edge is a wall
+    reach = int(np.ceil(approx.max() / res)) + 2  # [cells] round each point
+    rows, cols = grid.world_to_cell(pts)
+    dr, dc = np.meshgrid(np.arange(-reach, reach + 1), np.arange(-reach, reach + 1),
+                         indexing="ij")
+    best = np.inf
+    for chunk in range(0, len(pts), 256):
+        r = np.clip(rows[chunk:chunk + 256, None] + dr.ravel() + 1, 0, occ.shape[0] - 1)
+        c = np.clip(cols[chunk:chunk + 256, None] + dc.ravel() + 1, 0, occ.shape[1] - 1)
+        centre = grid.cell_to_world(r - 1, c - 1)  # (K, M, 2) the cells' centres
+        gap = np.maximum(np.abs(pts[chunk:chunk + 256, None] - centre) - h, 0.0)
+        d = np.where(occ[r, c], np.hypot(gap[..., 0], gap[..., 1]), np.inf)
+        best = min(best, float(d.min()))
+    return best - footprint.inscribed_radius
 
 
 def judge_paths(paths, problems, footprint, grid) -> PathJudgement:
@@ -197,7 +237,7 @@ def judge_paths(paths, problems, footprint, grid) -> PathJudgement:
     ``astar_length`` [m]) for ``footprint`` on ``grid``, as every planning benchmark does."""
     from ecahd_core.collision import check_collision
 
-    succ, fin, free, pen, ratio = [], [], [], [], []
+    succ, fin, free, pen, ratio, room = [], [], [], [], [], []
     for path, prob in zip(paths, problems):
         path = np.asarray(path, dtype=np.float64).reshape(-1, 2)
         d = np.linalg.norm(path - prob.goal, axis=1)
@@ -208,9 +248,10 @@ def judge_paths(paths, problems, footprint, grid) -> PathJudgement:
         pen.append(rep.penetration_fraction)
         ratio.append(float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
                      / max(prob.astar_length, 1e-9))
+        room.append(least_room(path, footprint, grid))
     return PathJudgement(success=np.array(succ, dtype=bool), final=np.array(fin, dtype=bool),
                          free=np.array(free, dtype=bool), penetration=np.array(pen),
-                         ratio=np.array(ratio))
+                         ratio=np.array(ratio), room=np.array(room))
 
 
 def _judge(paths, times, dd, problems, footprint, grid, *, method, guidance, robot, variant=""):
@@ -228,7 +269,8 @@ def _judge(paths, times, dd, problems, footprint, grid, *, method, guidance, rob
                       dd_ratio=float(np.mean(dd)) if dd else 0.0, problems=len(problems),
                       free_by_problem=[bool(f) for f in free],
                       time_ms_by_problem=[round(float(t), 2) for t in times],
-                      length_ratio_by_problem=[round(float(r), 4) for r in ratio])
+                      length_ratio_by_problem=[round(float(r), 4) for r in ratio],
+                      room_by_problem=[round(float(r), 4) for r in j.room])
 
 
 def problem_seed(seed: int, index: int) -> int:
