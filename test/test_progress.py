@@ -102,6 +102,12 @@ def test_the_subgoal_rule_replaces_a_first_leg_that_makes_no_progress_by_one_tha
     assert to_go(w[1:2])[0] < to_go(S[None])[0] - SUBGOAL_GAIN
     # a plan whose first leg already makes progress stays as it is
     assert rule.apply(hd.sparse, S, G, out, 20, generator=gen, times=times) is out
+    # the plan toward the subgoal keeps a waypoint per replan spacing of its distance, also on
+    # a goal's first plan (not Algorithm 1's P^g - p: P^g waypoints over 3 m dithered)
+    first = rule.apply(hd.sparse, S, G, straight, 0, generator=gen, times=times)
+    assert first.first_leg == "subgoal" and hd.sparse.config.horizon > 4
+    sub = first.waypoints[-2]
+    assert len(first.waypoints) - 1 == max(3, int(np.ceil(np.linalg.norm(sub - S) / 3.0)) + 1)
     # S and G either side of the wall, the route over 3x the straight line: roundabout, so
     # the rule acts from the goal's first plan; a free straight leg never is
     assert rule.roundabout(hd.sparse, S, G)
