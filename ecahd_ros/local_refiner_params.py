@@ -49,7 +49,7 @@ PARAMETERS = [
                                  "dynamic)"),
     ParamSpec("waypoint_tolerance", 0.3, "[m] reaching a waypoint this close starts the next "
                                          "segment (dynamic)"),
-    ParamSpec("precise_room", 0.1, "[m] precise tracking: where the robot, or the waypoint it "
+    ParamSpec("precise_room", 0.05, "[m] precise tracking: where the robot, or the waypoint it "
                                    "heads for, has less room than this beside its footprint "
                                    "(a door a little wider than the robot), pure pursuit uses "
                                    "precise_lookahead and precise_waypoint_tolerance, so a "

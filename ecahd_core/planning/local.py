@@ -77,7 +77,7 @@ class LocalRunnerConfig:
     # precise tracking: with less room than precise_room [m] beside the robot or at the
     # waypoint it heads for (LocalRunner.room), pure pursuit uses precise_lookahead and the
     # take-over waypoint_tolerance precise_tolerance (0 = off)
-    precise_room: float = 0.1  # [m]
+    precise_room: float = 0.05  # [m]
     precise_lookahead: float = 0.1  # [m]
     precise_tolerance: float = 0.15  # [m]
 
