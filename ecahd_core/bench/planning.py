@@ -217,7 +217,9 @@ def least_room(path, footprint, grid) -> float:
     approx = wall_distance(grid, pts)
     pts, approx = pts[approx <= approx.min() + 2 * res], approx[approx <= approx.min() + 2 * res]
     occ = np.pad(grid.occupied, 1, constant_values=True)  # (H + 2, W + 2): the edge is a wall
-    reach = int(np.ceil(approx.max() / res)) + 2  # [cells] round each point
+    # [cells] round each point: the nearest square's centre lies within the distance field's
+    # value + a cell + two half cell diagonals of the point's cell centre
+    reach = int(np.ceil(approx.max() / res)) + 3
     rows, cols = grid.world_to_cell(pts)
     dr, dc = np.meshgrid(np.arange(-reach, reach + 1), np.arange(-reach, reach + 1),
                          indexing="ij")
