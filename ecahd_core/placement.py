@@ -295,19 +295,35 @@ class WaypointPlacer:
         counts = np.ceil(length / res).astype(np.int64) + 1  # (K,) >= 1
         counts = np.maximum(counts, 2)
         n = int(counts.max(initial=2))
-        j = np.arange(n)[None, :]  # (1, n)
-        valid = j < counts[:, None]  # (K, n)
-        t = np.minimum(j / (counts[:, None] - 1), 1.0)  # (K, n)
-        # each sample's cell, as GridMap.world_to_cell; off the map (or NaN): the near border
-        col = np.fmin(np.fmax(np.floor((a[:, :1] + t * d[:, :1] - ox) / res), -1), grid.width)
-        row = np.fmin(np.fmax(np.floor((a[:, 1:] + t * d[:, 1:] - oy) / res), -1), grid.height)
-        idx = (row.astype(np.intp) + 1) * (grid.width + 2) + col.astype(np.intp) + 1
+        t = np.arange(n)[None, :] / (counts[:, None] - 1)  # (K, n)
+        np.minimum(t, 1.0, out=t)  # samples past a leg's count repeat its end (t = 1)
+
+        def cell(start, step, origin, top):
+            """Each sample's cell index along one axis, as GridMap.world_to_cell (start + t *
+            step - origin) / res, floored; off the map (or NaN): the near border. In place on
+            one (K, n) array: the same operations in the same order."""
+            x = t * step
+            x += start
+            x -= origin
+            x /= res
+            np.floor(x, out=x)
+            np.fmax(x, -1, out=x)
+            return np.fmin(x, top, out=x)
+
+        row = cell(a[:, 1:], d[:, 1:], oy, grid.height)
+        row += 1
+        row *= grid.width + 2
+        row += cell(a[:, :1], d[:, :1], ox, grid.width)
+        row += 1  # integers well below 2^53: exact in float64
+        idx = row.astype(np.intp)  # (K, n) flat index into the padded grid
         near = self._near_cells.take(idx)  # (K, n)
         if self._band is not None:
             along = t * length[:, None]  # (K, n) [m] from a
             inner = (along >= self._trim) & (along <= length[:, None] - self._trim)
             near |= inner & self._band_cells.take(idx)
-        return (near & valid).sum(axis=1) / counts * length
+        # the samples from a leg's count - 1 on are all its end (t = 1): counted once
+        hits = near.sum(axis=1) - (n - counts) * near[:, -1]
+        return hits / counts * length
 
     @cached_property
     def _near_cells(self) -> np.ndarray:
