@@ -21,6 +21,7 @@ import numpy as np
 
 from ecahd_core.astar import (COARSE_BLOCK_SIZE, AStarPlanner, CoarseAStarPlanner,
                               clearance_for_footprint)
+from ecahd_core.planning.horizon import distance_horizon
 
 # [m] how far round a point without the clearance (a waypoint beside a wall) its cost-to-go
 # looks for cells that have it
@@ -227,8 +228,8 @@ class SubgoalRule:
         # the subgoal is at most SUBGOAL_REACH x spacing of route away: its plan keeps a waypoint
         # per spacing of it (at least one interior waypoint), not Algorithm 1's P^g - p (eleven
         # waypoints over 3 m on a goal's first plan dithered round the start)
-        d = float(np.linalg.norm(sub - S))
-        h = min(sd.config.horizon, max(3, int(math.ceil(d / self.spacing - 1e-9)) + 1))
+        P_g = sd.config.horizon
+        h = min(P_g, max(3, distance_horizon(P_g, S, sub, self.spacing)))
         alt = sd.plan(S, sub, horizon=h, generator=generator, repair_legs=1)
         w = alt.waypoints
         if sd.leg_blocked(w) or not (to_go(w[1:2])[0]

@@ -215,7 +215,8 @@ def least_room(path, footprint, grid) -> float:
     # the distance field (cell centre to cell centre) is within a cell of the exact distance:
     # only points within two cells of its least value can hold the least exact distance
     approx = wall_distance(grid, pts)
-    pts, approx = pts[approx <= approx.min() + 2 * res], approx[approx <= approx.min() + 2 * res]
+    near = approx <= approx.min() + 2 * res
+    pts, approx = pts[near], approx[near]
     occ = np.pad(grid.occupied, 1, constant_values=True)  # (H + 2, W + 2): the edge is a wall
     # [cells] round each point: the nearest square's centre lies within the distance field's
     # value + a cell + two half cell diagonals of the point's cell centre

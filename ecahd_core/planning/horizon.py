@@ -73,8 +73,14 @@ def replan_horizon(horizon: int, iteration: int, start, goal,
     8-35 m (every colliding circle-robot plan on a generated warehouse, docs/RESULTS.md)."""
     h = max(2, horizon - iteration)
     if spacing is not None:
-        d = float(np.linalg.norm(np.asarray(goal, dtype=np.float64)
-                                 - np.asarray(start, dtype=np.float64)))
-        h = max(h, min(horizon, int(math.ceil(d / spacing - 1e-9)) + 1))
+        h = max(h, distance_horizon(horizon, start, goal, spacing))
     return h
+
+
+def distance_horizon(horizon: int, start, goal, spacing: float) -> int:
+    """A plan's horizon by distance alone: ceil(D / ``spacing``) + 1 waypoints, at most
+    ``horizon``, for the straight distance D [m] from ``start`` (2,) to ``goal`` (2,)."""
+    d = float(np.linalg.norm(np.asarray(goal, dtype=np.float64)
+                             - np.asarray(start, dtype=np.float64)))
+    return min(horizon, int(math.ceil(d / spacing - 1e-9)) + 1)
 

@@ -327,6 +327,7 @@ class SparseDiffusion:
         ``place_reach`` [m] (None: by the map and the model, ``placement.placer_for``; 0:
         off)."""
         from ecahd_core.cost import CollisionCost
+        from ecahd_core.general.checkpoint import GeneralCheckpoint
         from ecahd_core.model_zoo import load_sd
         from ecahd_core.placement import placer_for
 
@@ -335,8 +336,6 @@ class SparseDiffusion:
             cost = CollisionCost.build(grid, footprint)
         ckpt = load_sd(grid, path=model, footprint=footprint, horizon=config.horizon,
                        device=device)
-        from ecahd_core.general.checkpoint import GeneralCheckpoint
-
         return cls(ckpt, config, cost=cost, device=device,
                    placer=placer_for(grid, footprint, place_reach,
                                      general=isinstance(ckpt, GeneralCheckpoint)), grid=grid)
