@@ -204,3 +204,23 @@ def test_least_room_is_the_narrowest_gap_along_the_legs_not_only_at_the_points()
     ends = least_room(path[:1], fp, grid)
     assert ends == pytest.approx(0.5 - fp.inscribed_radius, abs=1e-9)
     assert room == pytest.approx(0.3 - fp.inscribed_radius, abs=1e-6)
+
+
+def test_bench_general_replan_spacing_reaches_the_planner(monkeypatch):
+    """``--replan-spacing M``: the planner re-plans with M (the table says so)."""
+    from ecahd_core.bench.general import GeneralBenchSettings, format_table, run_general_benchmark
+    from ecahd_core.planning import hierarchical
+
+    seen = []
+    original = hierarchical.HierarchicalPlanner.__init__
+
+    def spy(self, *args, **kwargs):
+        original(self, *args, **kwargs)
+        seen.append(self.replan_spacing)
+
+    monkeypatch.setattr(hierarchical.HierarchicalPlanner, "__init__", spy)
+    result = run_general_benchmark(GeneralBenchSettings(
+        maps=("maze2d-large",), problems=1, robots=("circle",), sd_model=None, dd_model=None,
+        replan_spacing=4.5), progress=False)
+    assert seen and set(seen) == {4.5}
+    assert "replan spacing 4.5 m" in format_table(result)

@@ -58,6 +58,8 @@ class GeneralBenchSettings:
     sd_steps: int | None = None  # SD's DDIM steps (None: the model's; the generalist's: 10)
     # re-plans warm-started from the plan before (SparseConfig's; -1: by the map)
     warm_fraction: float = -1.0
+    # [m] the re-plans' spacing (None: by the map and the model; 0: off, Algorithm 1's P^g - p)
+    replan_spacing: float | None = None
 
 
 @dataclass
@@ -99,7 +101,8 @@ def run_general_benchmark(settings: GeneralBenchSettings, *, progress: bool = Tr
             sample_seed=settings.sample_seed, per_problem_seeds=True,
             robots=tuple(settings.robots), methods=("hd",), guidance="on", ablation=False,
             sd_model=settings.sd_model, dd_model=settings.dd_model,
-            sd_steps=settings.sd_steps, warm_fraction=settings.warm_fraction, **overrides),
+            sd_steps=settings.sd_steps, warm_fraction=settings.warm_fraction,
+            replan_spacing=settings.replan_spacing, **overrides),
             progress=progress)
         for cell in r.cells:
             result.cells.append({"map": spec, "family": family_of(spec), **cell.to_dict()})
@@ -146,6 +149,8 @@ def format_table(result: GeneralBenchResult) -> str:
              f"{len(s.maps)} maps, {s.problems} problems each (seed {s.seed}, sampling seed "
              f"{s.sample_seed} per problem), rules off: {', '.join(s.off) or 'none'}, "
              + (f"SD {s.sd_steps} DDIM steps, " if s.sd_steps else "")
+             + (f"replan spacing {s.replan_spacing:g} m, " if s.replan_spacing is not None
+                else "")
              + f"{result.seconds / 60:.1f} min", "",
              "| family | robot | maps | problems | ECAHD alone % | with the net % | A* fallback "
              "% | unsafe % | median ms | p95 ms | length / A* median | p99 | least room cm "
@@ -183,6 +188,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="SD's re-plans start from the rest of the plan before, noised to "
                              "the last F (0..1) of the DDIM schedule; 0: from noise (the "
                              "paper); -1: by the map (0.3 on buildings)")
+    parser.add_argument("--replan-spacing", type=float, default=None, metavar="M",
+                        help="re-plans keep a waypoint per M metres left to the goal (default: "
+                             "by the map and the model, 3 m for the generalist; 0: off, "
+                             "Algorithm 1's P^g - p)")
     parser.add_argument("--json", metavar="FILE", help="also write every cell as JSON")
     parser.add_argument("--md", metavar="FILE", help="also write the table as markdown")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
@@ -196,7 +205,8 @@ def run(args: argparse.Namespace) -> int:
         maps=tuple(args.maps), problems=args.problems, seed=args.seed,
         sample_seed=args.sample_seed, robots=tuple(args.robots),
         sd_model=model(args.sd_model), dd_model=model(args.dd_model), off=tuple(args.off),
-        sd_steps=args.sd_steps, warm_fraction=args.warm_fraction),
+        sd_steps=args.sd_steps, warm_fraction=args.warm_fraction,
+        replan_spacing=args.replan_spacing),
         progress=not args.no_progress)
     table = format_table(result)
     print(table)
