@@ -39,6 +39,9 @@ BACKTRACKS = 2
 REPAIR_CANDIDATES = 30  # lattice steps across a repair reach at most (a coarser step beyond)
 # candidates per side the two-bend repair pairs up (TWO_BEND_SAMPLES^2 legs judged at most)
 TWO_BEND_SAMPLES = 48
+# legs per array in WaypointPlacer.wall_length (sorted by length: the short ones are not padded
+# to the longest one's samples)
+WALL_CHUNK = 128
 
 
 class WaypointPlacer:
@@ -286,14 +289,27 @@ class WaypointPlacer:
         transform of cell centres, less half a cell diagonal; each leg sampled at
         ceil(length / resolution) + 1 evenly spaced points, so a leg's value does not depend on
         the others)."""
-        grid = self.grid
-        res, (ox, oy) = grid.resolution, grid.origin[:2]
         b = np.asarray(b, dtype=np.float64).reshape(-1, 2)
         a = np.broadcast_to(np.asarray(a, dtype=np.float64), b.shape)
         d = b - a
         length = np.linalg.norm(d, axis=1)  # (K,)
-        counts = np.ceil(length / res).astype(np.int64) + 1  # (K,) >= 1
+        counts = np.ceil(length / self.grid.resolution).astype(np.int64) + 1  # (K,) >= 1
         counts = np.maximum(counts, 2)
+        if len(b) <= WALL_CHUNK:
+            return self._wall_length(a, d, length, counts)
+        # legs of similar sample counts together, so that few samples pad the shorter ones
+        order = np.argsort(counts, kind="stable")
+        out = np.empty(len(b))
+        for rows in np.array_split(order, -(-len(b) // WALL_CHUNK)):
+            out[rows] = self._wall_length(a[rows], d[rows], length[rows], counts[rows])
+        return out
+
+    def _wall_length(self, a: np.ndarray, d: np.ndarray, length: np.ndarray,
+                     counts: np.ndarray) -> np.ndarray:
+        """:meth:`wall_length` of K legs from ``a`` (K, 2) [m] along ``d`` (K, 2) [m] of
+        ``length`` (K,) [m], each sampled at ``counts`` (K,) >= 2 points -> (K,) [m]."""
+        grid = self.grid
+        res, (ox, oy) = grid.resolution, grid.origin[:2]
         n = int(counts.max(initial=2))
         t = np.arange(n)[None, :] / (counts[:, None] - 1)  # (K, n)
         np.minimum(t, 1.0, out=t)  # samples past a leg's count repeat its end (t = 1)

@@ -224,3 +224,26 @@ def test_bench_general_replan_spacing_reaches_the_planner(monkeypatch):
         replan_spacing=4.5), progress=False)
     assert seen and set(seen) == {4.5}
     assert "replan spacing 4.5 m" in format_table(result)
+
+
+def test_bench_general_precision_reaches_the_sd_transformer(monkeypatch):
+    """``--precision``: SD's sampler computes in it (the table and the JSON say which), and the
+    default is the node's "auto"."""
+    from ecahd_core.bench.general import GeneralBenchSettings, format_table, run_general_benchmark
+    from ecahd_core.diffusion import sampler
+
+    assert GeneralBenchSettings().precision == "auto"
+    seen = []
+    original = sampler.DiffusionSampler.__init__
+
+    def spy(self, *args, **kwargs):
+        original(self, *args, **kwargs)
+        seen.append(self.precision)
+
+    monkeypatch.setattr(sampler.DiffusionSampler, "__init__", spy)
+    result = run_general_benchmark(GeneralBenchSettings(
+        maps=("maze2d-large",), problems=1, robots=("circle",), sd_model=None, dd_model=None,
+        precision="bf16"), progress=False)
+    assert "bf16" in seen
+    assert result.to_dict()["precision"] == "bf16"
+    assert "SD in bf16" in format_table(result)

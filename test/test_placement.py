@@ -175,8 +175,10 @@ def test_repairing_only_the_first_legs_gives_those_legs_as_a_full_repair_does():
 def test_wall_length_samples_each_leg_and_counts_off_map_as_wall():
     """wall_length's samples (ceil(length / resolution) + 1 per leg) are judged as
     StaticClearance.wall_distance < the inscribed radius + half a cell diagonal, off the map
-    included; each leg's value does not depend on the others in its batch."""
+    included; each leg's value does not depend on the others in its batch (a batch longer than
+    WALL_CHUNK is judged in chunks of similar legs)."""
     from ecahd_core.collision import wall_distance
+    from ecahd_core.placement import WALL_CHUNK
 
     grid = block_map(0.05)
     placer = WaypointPlacer(grid, make_footprint("circle"))
@@ -186,6 +188,7 @@ def test_wall_length_samples_each_leg_and_counts_off_map_as_wall():
     b = a + rng.uniform(-3, 3, (200, 2))
     b[:5] = a[:5]  # zero-length legs
     got = placer.wall_length(a, b)
+    assert len(a) > WALL_CHUNK
     for k in range(len(a)):
         length = float(np.linalg.norm(b[k] - a[k]))
         count = max(int(np.ceil(length / grid.resolution)) + 1, 2)
@@ -193,6 +196,7 @@ def test_wall_length_samples_each_leg_and_counts_off_map_as_wall():
         near = wall_distance(grid, pts) < placer._near
         assert got[k] == pytest.approx(near.mean() * length, abs=1e-9)
     np.testing.assert_array_equal(placer.wall_length(a[7], b[7:8]), got[7:8])
+    np.testing.assert_array_equal(placer.wall_length(a[::-1], b[::-1]), got[::-1])
     off = np.array([[lo[0] - 0.5, lo[1]]])  # a leg wholly off the map is wall all along
     assert placer.wall_length(off[0], off + [1.0, 0.0])[0] == pytest.approx(1.0)
 

@@ -60,6 +60,9 @@ class GeneralBenchSettings:
     warm_fraction: float = -1.0
     # [m] the re-plans' spacing (None: by the map and the model; 0: off, Algorithm 1's P^g - p)
     replan_spacing: float | None = None
+    # the SD Transformer's inference precision: "auto" (bf16 where the CPU computes it
+    # natively), as global_planner's inference_precision and ``ecahd plan``; "fp32", "bf16"
+    precision: str = "auto"
 
 
 @dataclass
@@ -67,10 +70,11 @@ class GeneralBenchResult:
     settings: GeneralBenchSettings
     cells: list = field(default_factory=list)  # (map, family, CellResult dict)
     seconds: float = 0.0
+    precision: str = ""  # what settings.precision resolved to on this machine
 
     def to_dict(self) -> dict:
-        return {"settings": asdict(self.settings), "seconds": self.seconds,
-                "cells": self.cells}
+        return {"settings": asdict(self.settings), "precision": self.precision,
+                "seconds": self.seconds, "cells": self.cells}
 
 
 def family_of(spec: str) -> str:
@@ -93,7 +97,10 @@ def run_general_benchmark(settings: GeneralBenchSettings, *, progress: bool = Tr
     if unknown:
         raise EcahdError(f"unknown rule(s) {unknown}; known: {sorted(RULES_OFF)}")
     overrides = {k: v for rule in settings.off for k, v in RULES_OFF[rule].items()}
-    result = GeneralBenchResult(settings=settings)
+    from ecahd_core.threads import resolve_precision
+
+    precision = resolve_precision(settings.precision)
+    result = GeneralBenchResult(settings=settings, precision=precision)
     t0 = time.perf_counter()
     for spec in settings.maps:
         r = run_planning_benchmark(PlanningBenchSettings(
@@ -102,7 +109,7 @@ def run_general_benchmark(settings: GeneralBenchSettings, *, progress: bool = Tr
             robots=tuple(settings.robots), methods=("hd",), guidance="on", ablation=False,
             sd_model=settings.sd_model, dd_model=settings.dd_model,
             sd_steps=settings.sd_steps, warm_fraction=settings.warm_fraction,
-            replan_spacing=settings.replan_spacing, **overrides),
+            replan_spacing=settings.replan_spacing, precision=precision, **overrides),
             progress=progress)
         for cell in r.cells:
             result.cells.append({"map": spec, "family": family_of(spec), **cell.to_dict()})
@@ -151,7 +158,7 @@ def format_table(result: GeneralBenchResult) -> str:
              + (f"SD {s.sd_steps} DDIM steps, " if s.sd_steps else "")
              + (f"replan spacing {s.replan_spacing:g} m, " if s.replan_spacing is not None
                 else "")
-             + f"{result.seconds / 60:.1f} min", "",
+             + f"SD in {result.precision or s.precision}, {result.seconds / 60:.1f} min", "",
              "| family | robot | maps | problems | ECAHD alone % | with the net % | A* fallback "
              "% | unsafe % | median ms | p95 ms | length / A* median | p99 | least room cm "
              "median | p5 |",
@@ -192,6 +199,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="re-plans keep a waypoint per M metres left to the goal (default: "
                              "by the map and the model, 3 m for the generalist; 0: off, "
                              "Algorithm 1's P^g - p)")
+    from ecahd_core.threads import add_precision_argument
+
+    add_precision_argument(parser, d.precision, "the SD Transformer's inference precision "
+                           "(auto: bf16 where the CPU computes it natively, as global_planner's "
+                           "inference_precision)")
     parser.add_argument("--json", metavar="FILE", help="also write every cell as JSON")
     parser.add_argument("--md", metavar="FILE", help="also write the table as markdown")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
@@ -206,7 +218,7 @@ def run(args: argparse.Namespace) -> int:
         sample_seed=args.sample_seed, robots=tuple(args.robots),
         sd_model=model(args.sd_model), dd_model=model(args.dd_model), off=tuple(args.off),
         sd_steps=args.sd_steps, warm_fraction=args.warm_fraction,
-        replan_spacing=args.replan_spacing),
+        replan_spacing=args.replan_spacing, precision=args.precision),
         progress=not args.no_progress)
     table = format_table(result)
     print(table)
