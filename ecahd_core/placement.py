@@ -170,6 +170,7 @@ class WaypointPlacer:
         xy = np.asarray(waypoints, dtype=np.float64).reshape(-1, 2)
         added = 0
         span = len(xy) - 1 if legs is None else min(int(legs), len(xy) - 1)  # legs to repair
+        failed = set()  # legs no waypoint improved: a later round would search them in vain
         for _ in range(self.leg_rounds if rounds is None else rounds):
             if len(xy) < 2:
                 break
@@ -179,13 +180,15 @@ class WaypointPlacer:
             pieces, grown = [xy[:1]], 0
             for k in range(len(xy) - 1):
                 a, b = xy[k], xy[k + 1]
-                if k < span and walls[k] > 0:
+                if k < span and walls[k] > 0 and (leg := (a.tobytes(), b.tobytes())) not in failed:
                     reach = min(self.repair_reach, 0.5 * float(np.linalg.norm(b - a)))
                     mid = self._best(0.5 * (a + b), self._repair_lattice(reach), a, b,
                                      need=walls[k])
                     if mid is None and self.two_bends:
                         mid = self._two_bends(a, b, need=walls[k])
-                    if mid is not None:
+                    if mid is None:
+                        failed.add(leg)
+                    else:
                         mid = mid.reshape(-1, 2)
                         pieces.append(mid)
                         grown += len(mid)

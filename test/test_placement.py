@@ -69,6 +69,31 @@ def test_leg_repair_bends_a_leg_that_crosses_a_wall_round_it():
     assert placer.repair(free)[1] == 0
 
 
+def test_leg_repair_searches_a_leg_no_waypoint_improves_once_not_every_round(monkeypatch):
+    """A leg through a wall thicker than the repair's reach (no free waypoint within it)
+    stays as it is, and the later rounds do not search it again (the same leg, the same
+    answer)."""
+    data = np.zeros((200, 120), dtype=np.int8)  # 6 x 10 m at 0.05 m
+    data[20:180, :] = 100  # a wall across the room from y = 1 m to y = 9 m
+    grid = GridMap(data, 0.05, (0.0, 0.0), name="wall")
+    robot = make_footprint("circle")
+    plan = np.array([[0.5, 0.5], [2.5, 0.5], [2.5, 9.5]])  # the second leg crosses it
+    placer = WaypointPlacer(grid, robot, reach=1.0, leg_rounds=3)
+    calls = {"best": 0, "two_bends": 0}
+    for name in calls:
+        original = getattr(WaypointPlacer, f"_{name}")
+
+        def spy(self, *args, _original=original, _name=name, **kwargs):
+            calls[_name] += 1
+            return _original(self, *args, **kwargs)
+
+        monkeypatch.setattr(WaypointPlacer, f"_{name}", spy)
+    repaired, added = placer.repair(plan)
+    assert added == 0
+    np.testing.assert_array_equal(repaired, plan)
+    assert calls == {"best": 1, "two_bends": 1}
+
+
 def test_placer_for_chooses_by_map_size_and_rejects_bad_reach():
     robot = make_footprint("circle")
     small = block_map()  # 2400 cells: off unless asked for
