@@ -189,12 +189,20 @@ class DenseStage:
 
     def local_cost(self, segments: torch.Tensor, goals: torch.Tensor) -> torch.Tensor:
         """J's collision cost c^l of local plans. segments: (B, P^l, 2), goals: (B, 2) -> (B,)."""
+        return self._local_terms(segments, goals).collision_cost
+
+    def local_peak(self, segments: torch.Tensor) -> torch.Tensor:
+        """J's peak cost of local plans (the highest cost map value the swept footprint
+        reads: the nearer a wall, the higher). segments: (B, P^l, 2) -> (B,)."""
+        return self._local_terms(segments, segments[:, -1]).peak_cost
+
+    def _local_terms(self, segments: torch.Tensor, goals: torch.Tensor):
         from ecahd_core.cost import trajectory_cost
 
         with torch.no_grad():
             return trajectory_cost(segments.to(self.costmap.dtype), goals.to(self.costmap.dtype),
                                    self.footprint_points, self.costmap,
-                                   **self.cost_config.cost_kwargs()).collision_cost
+                                   **self.cost_config.cost_kwargs())
 
     def refine(self, starts: torch.Tensor, goals: torch.Tensor, *,
                generator: torch.Generator | None = None) -> tuple[torch.Tensor, torch.Tensor]:

@@ -135,13 +135,19 @@ class HierarchicalPlanner(DenseStage):
             local test (J's c^l <= c_th over P^l points) and the exact checker
             (:func:`~ecahd_core.shortcut.shortcut_path`). :attr:`HierarchicalPlan.shortcut`
             says when it acted; its time is ``timings_ms["shortcut"]``.
+        shortcut_room: the shortcut rule also takes a straight segment that comes no nearer a
+            wall than the stretch of the plan it replaces (J's peak cost;
+            :func:`~ecahd_core.shortcut.shortcut_path`'s ``peak``). For a round footprint the
+            peak is a function of the room beside it in any heading, so the plan's least room
+            never shrinks; ``for_map`` turns it on for round footprints only.
     """
 
     def __init__(self, sparse: SparseDiffusion, dense_checkpoint, *, costmap, footprint_points,
                  cost_config=None, dense: DenseConfig | None = None, device: str = "cpu",
                  replan: str = "every_waypoint", exact_check=None,
                  replan_spacing: float | None = None, backtracks: int = BACKTRACKS,
-                 subgoals: bool = True, settle: bool = True, shortcut: bool = True) -> None:
+                 subgoals: bool = True, settle: bool = True, shortcut: bool = True,
+                 shortcut_room: bool = False) -> None:
         if int(backtracks) != backtracks or backtracks < 0:
             raise EcahdError(f"backtracks must be an integer >= 0 (0: off), got {backtracks!r}")
         # one iteration's SD plan with its rules: the same object the online planner calls
@@ -153,6 +159,7 @@ class HierarchicalPlanner(DenseStage):
         self.backtracks = int(backtracks)
         self.sparse = sparse
         self.shortcut = bool(shortcut)
+        self.shortcut_room = bool(shortcut_room)
 
     @classmethod
     def for_map(cls, grid, footprint, sd: SparseDiffusion, *, dense: DenseConfig | None = None,
@@ -178,7 +185,7 @@ class HierarchicalPlanner(DenseStage):
                                                      general=sd.general),
                    exact_check=exact_check_for(grid, footprint) if exact else None,
                    backtracks=backtracks, subgoals=subgoals, settle=settle,
-                   shortcut=shortcut)
+                   shortcut=shortcut, shortcut_room=footprint.is_circle)
 
     @property
     def replan(self) -> str:
@@ -261,7 +268,8 @@ class HierarchicalPlanner(DenseStage):
         pulled = shortcut_path(result.trajectory,
                                cost=lambda plans: self.local_cost(plans, plans[:, -1]),
                                c_th=self.dense.c_th, points=self.dense.points,
-                               exact_check=self.exact_check)
+                               exact_check=self.exact_check,
+                               peak=self.local_peak if self.shortcut_room else None)
         times = dict(result.timings_ms)
         times["shortcut"] = (time.perf_counter() - t0) * 1e3
         times["total"] = (time.perf_counter() - t_total) * 1e3
