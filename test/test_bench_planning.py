@@ -206,22 +206,32 @@ def test_least_room_is_the_narrowest_gap_along_the_legs_not_only_at_the_points()
     assert room == pytest.approx(0.3 - fp.inscribed_radius, abs=1e-6)
 
 
-def test_bench_general_replan_spacing_reaches_the_planner(monkeypatch):
-    """``--replan-spacing M``: the planner re-plans with M (the table says so)."""
-    from ecahd_core.bench.general import GeneralBenchSettings, format_table, run_general_benchmark
-    from ecahd_core.planning import hierarchical
+def run_general_seeing(monkeypatch, cls, attribute, **settings):
+    """``bench general`` on one maze2d-large problem for the circle (its own models) with
+    ``settings``, recording ``attribute`` of every ``cls`` it builds -> (result, values)."""
+    from ecahd_core.bench.general import GeneralBenchSettings, run_general_benchmark
 
     seen = []
-    original = hierarchical.HierarchicalPlanner.__init__
+    original = cls.__init__
 
     def spy(self, *args, **kwargs):
         original(self, *args, **kwargs)
-        seen.append(self.replan_spacing)
+        seen.append(getattr(self, attribute))
 
-    monkeypatch.setattr(hierarchical.HierarchicalPlanner, "__init__", spy)
+    monkeypatch.setattr(cls, "__init__", spy)
     result = run_general_benchmark(GeneralBenchSettings(
         maps=("maze2d-large",), problems=1, robots=("circle",), sd_model=None, dd_model=None,
-        replan_spacing=4.5), progress=False)
+        **settings), progress=False)
+    return result, seen
+
+
+def test_bench_general_replan_spacing_reaches_the_planner(monkeypatch):
+    """``--replan-spacing M``: the planner re-plans with M (the table says so)."""
+    from ecahd_core.bench.general import format_table
+    from ecahd_core.planning.hierarchical import HierarchicalPlanner
+
+    result, seen = run_general_seeing(monkeypatch, HierarchicalPlanner, "replan_spacing",
+                                      replan_spacing=4.5)
     assert seen and set(seen) == {4.5}
     assert "replan spacing 4.5 m" in format_table(result)
 
@@ -229,21 +239,12 @@ def test_bench_general_replan_spacing_reaches_the_planner(monkeypatch):
 def test_bench_general_precision_reaches_the_sd_transformer(monkeypatch):
     """``--precision``: SD's sampler computes in it (the table and the JSON say which), and the
     default is the node's "auto"."""
-    from ecahd_core.bench.general import GeneralBenchSettings, format_table, run_general_benchmark
-    from ecahd_core.diffusion import sampler
+    from ecahd_core.bench.general import GeneralBenchSettings, format_table
+    from ecahd_core.diffusion.sampler import DiffusionSampler
 
     assert GeneralBenchSettings().precision == "auto"
-    seen = []
-    original = sampler.DiffusionSampler.__init__
-
-    def spy(self, *args, **kwargs):
-        original(self, *args, **kwargs)
-        seen.append(self.precision)
-
-    monkeypatch.setattr(sampler.DiffusionSampler, "__init__", spy)
-    result = run_general_benchmark(GeneralBenchSettings(
-        maps=("maze2d-large",), problems=1, robots=("circle",), sd_model=None, dd_model=None,
-        precision="bf16"), progress=False)
+    result, seen = run_general_seeing(monkeypatch, DiffusionSampler, "precision",
+                                      precision="bf16")
     assert "bf16" in seen
     assert result.to_dict()["precision"] == "bf16"
     assert "SD in bf16" in format_table(result)
