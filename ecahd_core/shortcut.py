@@ -19,7 +19,8 @@ Where a corridor or a door is narrower than J's margin allows, no straight plan 
 passes c_th, and the joined path kept DD's and polishing's wiggles there (maze2d-large's circle
 robot: 1.12x A*'s length, a 3.2 m problem drawn 4.2 m long). With ``peak``, a shortcut also
 passes where J's peak along it is no higher than along the stretch of the path it replaces: it
-comes no nearer a wall than the path already does (docs/rules.md, "shortcut").
+comes no nearer a wall than the path already does, to the cost map's accuracy (a distance field
+of cell centres: about a cell; docs/rules.md, "shortcut").
 
 Paths are (N, 2) [m] in the map's frame.
 """

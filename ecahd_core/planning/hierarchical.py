@@ -105,8 +105,9 @@ class HierarchicalPlanner(DenseStage):
             local plans in collision after DD, polishing and the exact rule, the first of them
             (or else the iteration before it, which chose where it starts; then the next
             colliding one, at most BACKTRACK_TRIES iterations a round) takes another candidate
-            of its SD batch instead: the best-ranked one whose first leg (placed and repaired) gets a local plan the checker finds
-            free, the candidates' local stages run in one batch. The iterations after it are
+            of its SD batch instead: the best-ranked one whose first leg (placed and repaired)
+            gets a local plan the checker finds free, the candidates' local stages run in one
+            batch. The iterations after it are
             planned again from its new waypoint. 0 turns it off. :attr:`HierarchicalPlan.
             backtracked` counts the rounds that took a candidate.
         subgoals: the subgoal rule (ours; every_waypoint with a replan spacing and the
@@ -139,7 +140,8 @@ class HierarchicalPlanner(DenseStage):
             wall than the stretch of the plan it replaces (J's peak cost;
             :func:`~ecahd_core.shortcut.shortcut_path`'s ``peak``). For a round footprint the
             peak is a function of the room beside it in any heading, so the plan's least room
-            never shrinks; ``for_map`` turns it on for round footprints only.
+            does not shrink (to the cost map's accuracy, about a cell); ``for_map`` turns it on
+            for round footprints only.
     """
 
     def __init__(self, sparse: SparseDiffusion, dense_checkpoint, *, costmap, footprint_points,
