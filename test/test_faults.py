@@ -768,13 +768,14 @@ def test_malformed_input_to_planner_and_refiner(ros_context, capfd, tmp_path):
             ("huge", odom_msg(x=1e30))], both)
         # odometry in a frame tf does not join to map (yet): a warning naming the missing
         # transform, at most every few seconds (a robot's first odometry comes before tf)
+        # (re-published like the others: DDS here loses a message now and then)
         mark = logs.mark()
-        publish("odom", odom_msg(frame="odom"))
-        wait_for(lambda: all(any(line.startswith("[WARN]") and f"[{node}]" in line
+        answered(lambda: publish("odom", odom_msg(frame="odom")),
+                 lambda: all(any(line.startswith("[WARN]") and f"[{node}]" in line
                                  and "no transform map -> odom" in line
                                  for line in logs.read()[mark:].splitlines())
                              for node in ("global_planner", "local_refiner")),
-                 "a warning about odometry in odom without tf", 8.0)
+                 "a warning about odometry in odom without tf")
         assert not logs.errors("global_planner", mark) and not logs.errors("local_refiner", mark)
         bad_messages("odom", [("NaN quaternion", odom_msg(qz=math.nan, qw=math.nan))],
                      {"global_planner": (0, 1), "local_refiner": (1, 1)})
