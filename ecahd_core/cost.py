@@ -133,11 +133,14 @@ class CollisionCost:
         points = torch.as_tensor(footprint.points, dtype=torch.float32).contiguous()
         return cls(costmap=config.make_costmap(grid), footprint_points=points, config=config)
 
+    def terms(self, traj: torch.Tensor) -> "CostTerms":
+        """J of each trajectory towards its own last point: traj (B, P, 2) [m] -> CostTerms."""
+        return trajectory_cost(traj, traj[:, -1], self.footprint_points, self.costmap,
+                               **self.config.cost_kwargs())
+
     def collision_cost(self, traj: torch.Tensor) -> torch.Tensor:
         """c^l of each trajectory: traj (B, P, 2) [m] -> (B,) J's collision cost."""
-        terms = trajectory_cost(traj, traj[:, -1], self.footprint_points, self.costmap,
-                                **self.config.cost_kwargs())
-        return terms.collision_cost
+        return self.terms(traj).collision_cost
 
 
 @dataclass(frozen=True)

@@ -33,7 +33,7 @@ def length(path):
 
 
 def pull(path, cost, check, c_th=0.1):
-    return shortcut_path(path, cost=cost.collision_cost, c_th=c_th, points=4, exact_check=check)
+    return shortcut_path(path, terms=cost.terms, c_th=c_th, points=4, exact_check=check)
 
 
 def wiggly(points, amplitude=0.15, per_leg=6):
@@ -117,22 +117,19 @@ def corridor():
 
 def test_with_peak_a_wiggle_in_a_corridor_narrower_than_the_margin_is_pulled_taut_keeping_room():
     """No straight plan down the corridor passes c_th (J's margin exceeds its room), so the
-    c_th test keeps every wiggle; with ``peak`` a shortcut that comes no nearer a wall than the
-    stretch it replaces passes: the path is pulled taut and its least room does not shrink."""
+    c_th test keeps every wiggle; with ``by_peak`` a shortcut that comes no nearer a wall than
+    the stretch it replaces passes: the path is pulled taut and its least room does not shrink."""
     from ecahd_core.bench.planning import least_room
-    from ecahd_core.planning.dense import DenseConfig, DenseStage
 
     grid, fp = corridor(), make_footprint("circle")
     cost = CollisionCost.build(grid, fp, CostConfig(margin=0.3))
     check = exact_check_for(grid, fp)
     path = wiggly(np.array([(0.8, 1.45), (9.2, 1.45)]), amplitude=0.03, per_leg=24)
     assert check_collision(path, fp, grid).collision_free
-    stage = DenseStage(None, costmap=cost.costmap, footprint_points=cost.footprint_points,
-                       cost_config=cost.config, dense=DenseConfig(enabled=False, points=4))
     plain = pull(path, cost, check)
     assert len(plain) == len(path)  # the c_th test alone finds no shortcut
-    out = shortcut_path(path, cost=cost.collision_cost, c_th=0.1, points=4, exact_check=check,
-                        peak=stage.local_peak)
+    out = shortcut_path(path, terms=cost.terms, c_th=0.1, points=4, exact_check=check,
+                        by_peak=True)
     assert np.array_equal(out[0], path[0]) and np.array_equal(out[-1], path[-1])
     assert len(out) < len(path) // 4 and length(out) < 0.99 * length(path)
     assert not check(out).any()

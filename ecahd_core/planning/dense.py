@@ -189,14 +189,11 @@ class DenseStage:
 
     def local_cost(self, segments: torch.Tensor, goals: torch.Tensor) -> torch.Tensor:
         """J's collision cost c^l of local plans. segments: (B, P^l, 2), goals: (B, 2) -> (B,)."""
-        return self._local_terms(segments, goals).collision_cost
+        return self.local_terms(segments, goals).collision_cost
 
-    def local_peak(self, segments: torch.Tensor) -> torch.Tensor:
-        """J's peak cost of local plans (the highest cost map value the swept footprint
-        reads: the nearer a wall, the higher). segments: (B, P^l, 2) -> (B,)."""
-        return self._local_terms(segments, segments[:, -1]).peak_cost
-
-    def _local_terms(self, segments: torch.Tensor, goals: torch.Tensor):
+    def local_terms(self, segments: torch.Tensor, goals: torch.Tensor):
+        """J of local plans (CostTerms: c^l, and the peak, the highest cost map value the
+        swept footprint reads). segments: (B, P^l, 2), goals: (B, 2) -> (B,) each."""
         from ecahd_core.cost import trajectory_cost
 
         with torch.no_grad():

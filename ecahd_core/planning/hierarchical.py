@@ -138,7 +138,7 @@ class HierarchicalPlanner(DenseStage):
             says when it acted; its time is ``timings_ms["shortcut"]``.
         shortcut_room: the shortcut rule also takes a straight segment that comes no nearer a
             wall than the stretch of the plan it replaces (J's peak cost;
-            :func:`~ecahd_core.shortcut.shortcut_path`'s ``peak``). For a round footprint the
+            :func:`~ecahd_core.shortcut.shortcut_path`'s ``by_peak``). For a round footprint the
             peak is a function of the room beside it in any heading, so the plan's least room
             does not shrink (to the cost map's accuracy, about a cell); ``for_map`` turns it on
             for round footprints only.
@@ -268,10 +268,9 @@ class HierarchicalPlanner(DenseStage):
 
         t0 = time.perf_counter()
         pulled = shortcut_path(result.trajectory,
-                               cost=lambda plans: self.local_cost(plans, plans[:, -1]),
+                               terms=lambda plans: self.local_terms(plans, plans[:, -1]),
                                c_th=self.dense.c_th, points=self.dense.points,
-                               exact_check=self.exact_check,
-                               peak=self.local_peak if self.shortcut_room else None)
+                               exact_check=self.exact_check, by_peak=self.shortcut_room)
         times = dict(result.timings_ms)
         times["shortcut"] = (time.perf_counter() - t0) * 1e3
         times["total"] = (time.perf_counter() - t_total) * 1e3
