@@ -40,8 +40,8 @@ REPAIR_CANDIDATES = 30  # lattice steps across a repair reach at most (a coarser
 # candidates per side the two-bend repair pairs up (TWO_BEND_SAMPLES^2 legs judged at most)
 TWO_BEND_SAMPLES = 48
 # legs per array in WaypointPlacer.wall_length (sorted by length: the short ones are not padded
-# to the longest one's samples)
-WALL_CHUNK = 128
+# to the longest one's samples; fewer, larger arrays since its cells are read by cv2.remap)
+WALL_CHUNK = 1024
 
 
 class WaypointPlacer:
@@ -310,52 +310,87 @@ class WaypointPlacer:
     def _wall_length(self, a: np.ndarray, d: np.ndarray, length: np.ndarray,
                      counts: np.ndarray) -> np.ndarray:
         """:meth:`wall_length` of K legs from ``a`` (K, 2) [m] along ``d`` (K, 2) [m] of
-        ``length`` (K,) [m], each sampled at ``counts`` (K,) >= 2 points -> (K,) [m]."""
+        ``length`` (K,) [m], each sampled at ``counts`` (K,) >= 2 points -> (K,) [m].
+
+        The samples' cells are read by one ``cv2.remap`` (nearest) on float32 cell coordinates
+        (a sample within ~1e-4 cell of a cell's edge may be read in its neighbour): a quarter of
+        the time per call of numpy's index arithmetic in float64 before 2026-12-07 21:30 (the
+        profile of docs/general.md, "What remains")."""
         grid = self.grid
         res, (ox, oy) = grid.resolution, grid.origin[:2]
         n = int(counts.max(initial=2))
-        t = np.arange(n)[None, :] / (counts[:, None] - 1)  # (K, n)
+        t = np.arange(n, dtype=np.float32)[None, :] / (counts[:, None] - 1).astype(np.float32)
         np.minimum(t, 1.0, out=t)  # samples past a leg's count repeat its end (t = 1)
-
-        def cell(start, step, origin, top):
-            """Each sample's cell index along one axis, as GridMap.world_to_cell (start + t *
-            step - origin) / res, floored; off the map (or NaN): the near border. In place on
-            one (K, n) array: the same operations in the same order."""
-            x = t * step
-            x += start
-            x -= origin
-            x /= res
-            np.floor(x, out=x)
-            np.fmax(x, -1, out=x)
-            return np.fmin(x, top, out=x)
-
-        row = cell(a[:, 1:], d[:, 1:], oy, grid.height)
-        row += 1
-        row *= grid.width + 2
-        row += cell(a[:, :1], d[:, :1], ox, grid.width)
-        row += 1  # integers well below 2^53: exact in float64
-        idx = row.astype(np.intp)  # (K, n) flat index into the padded grid
-        near = self._near_cells.take(idx)  # (K, n)
+        # cell coordinates less half a cell (remap's nearest rounds where GridMap.world_to_cell
+        # floors) plus EDGE_SHIFT, so that a sample on a cell's edge (waypoints on a lattice of
+        # the resolution) is read in the cell above it, as floor reads it, not rounded to even
+        u = t * (d[:, :1] / res).astype(np.float32)
+        u += ((a[:, :1] - ox) / res - (0.5 - EDGE_SHIFT)).astype(np.float32)
+        v = t * (d[:, 1:] / res).astype(np.float32)
+        v += ((a[:, 1:] - oy) / res - (0.5 - EDGE_SHIFT)).astype(np.float32)
+        near = read_cells(self._near_image, u, v)  # (K, n) 0 / 1
         if self._band is not None:
             along = t * length[:, None]  # (K, n) [m] from a
             inner = (along >= self._trim) & (along <= length[:, None] - self._trim)
-            near |= inner & self._band_cells.take(idx)
+            near |= inner & read_cells(self._band_image, u, v).astype(bool)
         # the samples from a leg's count - 1 on are all its end (t = 1): counted once
-        hits = near.sum(axis=1) - (n - counts) * near[:, -1]
+        hits = near.sum(axis=1, dtype=np.int64) - (n - counts) * near[:, -1]
         return hits / counts * length
 
     @cached_property
-    def _near_cells(self) -> np.ndarray:
-        """Flat (H + 2) (W + 2) bool: a cell (a border of off-map cells round the map) whose
-        centre lies nearer an occupied cell centre than ``_near`` (:meth:`wall_length`'s test,
-        the same as ``StaticClearance.wall_distance(...) < _near``)."""
-        return np.pad(self.grid.free_distance < self._near, 1, constant_values=True).ravel()
+    def _near_image(self) -> np.ndarray:
+        """(H, W) uint8: 1 where a cell's centre lies nearer an occupied cell centre than
+        ``_near`` (:meth:`wall_length`'s test, the same as ``StaticClearance.wall_distance(...)
+        < _near``; off the map reads as 1)."""
+        return (self.grid.free_distance < self._near).astype(np.uint8)
 
     @cached_property
-    def _band_cells(self) -> np.ndarray:
-        """As :attr:`_near_cells` for a circle of the footprint's half-width (:func:`leg_band`)."""
+    def _band_image(self) -> np.ndarray:
+        """As :attr:`_near_image` for a circle of the footprint's half-width (:func:`leg_band`)."""
         near = self._band + math.sqrt(0.5) * self.grid.resolution
-        return np.pad(self.grid.free_distance < near, 1, constant_values=True).ravel()
+        return (self.grid.free_distance < near).astype(np.uint8)
+
+
+# [cells] WaypointPlacer.wall_length reads a sample this near below a cell's edge in the cell
+# above it (float32 cell coordinates; an edge is where waypoints on a lattice of the resolution lie)
+EDGE_SHIFT = 2.0 ** -10
+# cv2.remap takes images and outputs under 32 767 pixels a side: larger ones are read in pieces
+REMAP_SIDE = 16_384
+
+
+def read_cells(image: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``image`` (H, W) uint8 read at the nearest pixel of each (column ``u``, row ``v``)
+    ((K, n) float32 each) -> (K, n) uint8; off the image (or NaN): 1. One ``cv2.remap`` where
+    the image and the output fit it; else in pieces: columns of the output, then windows of
+    the image round the samples (maps wider than REMAP_SIDE cells)."""
+    import cv2
+
+    K, n = u.shape
+    if K == 0 or n == 0:
+        return np.ones((K, n), dtype=np.uint8)
+    if n > REMAP_SIDE:
+        return np.concatenate([read_cells(image, u[:, j:j + REMAP_SIDE], v[:, j:j + REMAP_SIDE])
+                               for j in range(0, n, REMAP_SIDE)], axis=1)
+    H, W = image.shape
+    x0 = y0 = 0
+    if max(H, W) > REMAP_SIDE or K > REMAP_SIDE:
+        with np.errstate(invalid="ignore"):
+            lo = [np.nanmin(u, initial=np.inf), np.nanmin(v, initial=np.inf)]
+            hi = [np.nanmax(u, initial=-np.inf), np.nanmax(v, initial=-np.inf)]
+        x0, y0 = (int(np.clip(np.floor(q) - 1, 0, m)) for q, m in zip(lo, (W, H)))
+        x1, y1 = (int(np.clip(np.ceil(q) + 2, 0, m)) for q, m in zip(hi, (W, H)))
+        if max(x1 - x0, y1 - y0, K) > REMAP_SIDE:  # samples spread wider: half the legs each
+            if K == 1:
+                half = n // 2
+                return np.concatenate([read_cells(image, u[:, :half], v[:, :half]),
+                                       read_cells(image, u[:, half:], v[:, half:])], axis=1)
+            return np.concatenate([read_cells(image, u[:K // 2], v[:K // 2]),
+                                   read_cells(image, u[K // 2:], v[K // 2:])])
+        if x1 <= x0 or y1 <= y0:  # every sample off the map
+            return np.ones((K, n), dtype=np.uint8)
+        image, u, v = image[y0:y1, x0:x1], u - np.float32(x0), v - np.float32(y0)
+    return cv2.remap(image, u, v, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
+                     borderValue=1)
 
 
 def leg_band(footprint) -> tuple[float | None, float]:

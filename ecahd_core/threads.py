@@ -6,6 +6,8 @@ Two processes that each let torch use every core oversubscribe a 2-core robot co
 inference defaults to 1 thread (:data:`INFERENCE_THREADS`) and training to all cores; both are
 flags / parameters. Interop threads are set too, once per process (torch allows it only before
 any parallel work), so a second call with another count changes the intra-op pool only.
+OpenCV's pool gets the same count (the waypoint placer reads cells with ``cv2.remap`` hundreds
+of times a plan: left at every core, its threads woke on each call, 4x the system time).
 """
 from __future__ import annotations
 
@@ -27,7 +29,9 @@ def training_threads() -> int:
 
 
 def set_torch_threads(n: int) -> int:
-    """torch.set_num_threads(n) (and interop threads, once); returns n. n must be >= 1."""
+    """torch.set_num_threads(n) (and interop threads, once) and OpenCV's threads (the waypoint
+    placer's ``cv2.remap``, the maps' distance transforms); returns n. n must be >= 1."""
+    import cv2
     import torch
 
     from ecahd_core.errors import EcahdError
@@ -35,6 +39,7 @@ def set_torch_threads(n: int) -> int:
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:
         raise EcahdError(f"torch threads must be an integer >= 1, got {n!r}")
     torch.set_num_threads(n)
+    cv2.setNumThreads(n)
     try:
         torch.set_num_interop_threads(n)
     except RuntimeError:  # already set, or parallel work already started in this process

@@ -170,3 +170,20 @@ def test_plan_without_a_safe_plan_exits_2_and_still_writes_the_record(tmp_path, 
     r = json.loads(rec.read_text())
     assert r["rule"] == "unsafe" and not r["collision_free"] and r["unsafe_reason"]
     assert png.stat().st_size > 10_000
+
+
+def test_set_torch_threads_sets_opencvs_pool_too():
+    """The inference thread count holds for OpenCV's pool as well (the placer's cv2.remap)."""
+    import cv2
+    import torch
+
+    from ecahd_core.threads import set_torch_threads
+
+    before = torch.get_num_threads(), cv2.getNumThreads()
+    try:
+        cv2.setNumThreads(2)
+        assert set_torch_threads(1) == 1
+        assert cv2.getNumThreads() == 1 and torch.get_num_threads() == 1
+    finally:
+        torch.set_num_threads(before[0])
+        cv2.setNumThreads(before[1])

@@ -200,30 +200,43 @@ def test_repairing_only_the_first_legs_gives_those_legs_as_a_full_repair_does():
 def test_wall_length_samples_each_leg_and_counts_off_map_as_wall():
     """wall_length's samples (ceil(length / resolution) + 1 per leg) are judged as
     StaticClearance.wall_distance < the inscribed radius + half a cell diagonal, off the map
-    included; each leg's value does not depend on the others in its batch (a batch longer than
-    WALL_CHUNK is judged in chunks of similar legs)."""
-    from ecahd_core.collision import wall_distance
-    from ecahd_core.placement import WALL_CHUNK
+    included, each in the cell floor((xy - origin) / resolution + EDGE_SHIFT); its float32 cell
+    coordinates may read a sample within ~1e-4 cell of that edge in the neighbouring cell (at
+    most one sample of a leg, on few legs); each leg's value does not depend on the others in
+    its batch (a batch longer than WALL_CHUNK is judged in chunks of similar legs)."""
+    from ecahd_core.placement import EDGE_SHIFT, WALL_CHUNK
 
-    grid = block_map(0.05)
-    placer = WaypointPlacer(grid, make_footprint("circle"))
     rng = np.random.default_rng(3)
+    # scattered posts: the near region's edge lies everywhere
+    data = np.where(rng.random((80, 120)) < 0.004, 100, 0).astype(np.int8)
+    grid = GridMap(data, 0.05, (0.0, 0.0), name="posts")
+    placer = WaypointPlacer(grid, make_footprint("circle"))
     lo, hi = np.array(grid.bounds[:2]) - 1.0, np.array(grid.bounds[2:]) + 1.0
-    a = rng.uniform(lo, hi, (200, 2))
-    b = a + rng.uniform(-3, 3, (200, 2))
+    a = rng.uniform(lo, hi, (3 * WALL_CHUNK, 2))
+    b = a + rng.uniform(-3, 3, a.shape)
     b[:5] = a[:5]  # zero-length legs
+    # legs along cell edges (waypoints on a lattice of the resolution): read in the cells above
+    a[5:300] = np.round(a[5:300] / grid.resolution) * grid.resolution
+    b[5:300] = a[5:300] + np.round(b[5:300] - a[5:300]) * [[1.0, 0.0]]
+    near_map = np.pad(grid.free_distance < placer._near, 1, constant_values=True)
     got = placer.wall_length(a, b)
-    assert len(a) > WALL_CHUNK
+    off_by = []
     for k in range(len(a)):
         length = float(np.linalg.norm(b[k] - a[k]))
         count = max(int(np.ceil(length / grid.resolution)) + 1, 2)
         pts = a[k] + np.linspace(0.0, 1.0, count)[:, None] * (b[k] - a[k])
-        near = wall_distance(grid, pts) < placer._near
-        assert got[k] == pytest.approx(near.mean() * length, abs=1e-9)
+        cell = np.floor((pts - grid.origin[:2]) / grid.resolution + EDGE_SHIFT).astype(int)
+        cell = np.clip(cell, -1, [grid.width, grid.height])
+        near = near_map[cell[:, 1] + 1, cell[:, 0] + 1]
+        off_by.append(abs(got[k] - near.mean() * length) / (length / count + 1e-12))
+    off_by = np.array(off_by)
+    assert np.all(off_by[:300] < 1e-6), off_by[:300].max()
+    assert np.all(off_by < 1 + 1e-6) and np.mean(off_by > 1e-6) < 0.01, off_by.max()
     np.testing.assert_array_equal(placer.wall_length(a[7], b[7:8]), got[7:8])
     np.testing.assert_array_equal(placer.wall_length(a[::-1], b[::-1]), got[::-1])
     off = np.array([[lo[0] - 0.5, lo[1]]])  # a leg wholly off the map is wall all along
     assert placer.wall_length(off[0], off + [1.0, 0.0])[0] == pytest.approx(1.0)
+    assert placer.wall_length(a[0], np.empty((0, 2))).shape == (0,)
 
 
 def test_a_robot_wider_than_long_is_judged_by_its_half_width_along_a_leg_but_not_past_its_ends():
@@ -250,3 +263,38 @@ def test_a_robot_wider_than_long_is_judged_by_its_half_width_along_a_leg_but_not
     # the same leg judged by a circle of the half-width all along would have counted wall
     square = make_footprint("[[0.25, 0.25], [-0.25, 0.25], [-0.25, -0.25], [0.25, -0.25]]")
     assert WaypointPlacer(grid, square).leg_walls(ahead)[0] > 0
+
+
+def test_read_cells_reads_the_nearest_pixel_in_pieces_on_images_wider_than_remap_takes(
+        monkeypatch):
+    """read_cells (cv2.remap, nearest) reads the same pixels as rounding the coordinates
+    ((K, n) float32, off the image or NaN: 1), also where the image or the output is wider than
+    REMAP_SIDE: in column pieces and in windows round the samples, halving the legs (and a
+    single leg's samples) until a window fits."""
+    import ecahd_core.placement as placement
+
+    rng = np.random.default_rng(5)
+    image = (rng.random((90, 140)) < 0.5).astype(np.uint8)
+    u = rng.uniform(-5, 145, (40, 70)).astype(np.float32)
+    v = rng.uniform(-5, 95, (40, 70)).astype(np.float32)
+    u[:, :10] = np.linspace(0, 139, 10)[None]  # a few legs across the whole width
+    v[3, 5], u[4, 6] = np.nan, np.nan
+    col, row = np.rint(u), np.rint(v)
+    inside = (col >= 0) & (col < 140) & (row >= 0) & (row < 90)
+    want = np.ones(u.shape, dtype=np.uint8)
+    want[inside] = image[row[inside].astype(int), col[inside].astype(int)]
+    np.testing.assert_array_equal(placement.read_cells(image, u, v), want)
+    calls = []
+    import cv2
+
+    real = cv2.remap
+
+    def spy(img, *args, **kwargs):
+        calls.append(img.shape)
+        return real(img, *args, **kwargs)
+
+    monkeypatch.setattr(cv2, "remap", spy)
+    monkeypatch.setattr(placement, "REMAP_SIDE", 32)
+    np.testing.assert_array_equal(placement.read_cells(image, u, v), want)
+    assert len(calls) > 4 and all(max(s) <= 32 for s in calls)
+    np.testing.assert_array_equal(placement.read_cells(image, u[:0], v[:0]), want[:0])
