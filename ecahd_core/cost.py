@@ -203,10 +203,14 @@ def trajectory_cost(traj: torch.Tensor, goal, footprint_points, costmap: CostMap
     else:
         # The footprint at a pose (Eqs. 7-8) is linear in [cos psi, sin psi, x, y] and the DDA
         # points (Eq. 9) are linear in the poses, so both are one (P*4, M*2*R) matrix.
-        sweep, R = _sweep_matrix(footprint_points, traj, n_interp)
         psi = pose_headings(traj)  # (B, P) Eq. 4
         pose = torch.cat([torch.stack([torch.cos(psi), torch.sin(psi)], -1), traj], -1)  # (B, P, 4)
-        xy, pair_dim = (pose.reshape(B, P * 4) @ sweep).view(B, -1, 2, R), 2  # (B, M, 2, R)
+        if P <= SWEEP_MATRIX_POINTS:
+            sweep, R = _sweep_matrix(footprint_points, traj, n_interp)
+            xy = (pose.reshape(B, P * 4) @ sweep).view(B, -1, 2, R)  # (B, M, 2, R)
+        else:
+            xy = _swept(pose, footprint_points, n_interp)  # (B, M, 2, R)
+        pair_dim = 2
     cost = cmap.sample(xy, dim=pair_dim)  # (B, P), (B, M) or (B, M, R): lines 19-20
     collision = cost.sum(dim=tuple(range(1, cost.ndim)))  # (B,) line 21
     collision_cost = collision * (sigma_dist / sigma_col)  # line 24
@@ -283,6 +287,27 @@ def _placement_matrix(footprint: torch.Tensor) -> torch.Tensor:
     x_cols = torch.stack([rx, -ry, one, zero])  # (4, R) coefficients of (cos, sin, x, y) in x_r
     y_cols = torch.stack([ry, rx, zero, one])  # (4, R) ... in y_r
     return torch.cat([x_cols, y_cols], dim=1)  # (4, 2R)
+
+
+# trajectories of at most this many points are swept by one cached (P*4, M*2*R) matrix (one
+# matmul: the fastest for SD's and DD's short plans); longer ones, such as the joined path that
+# polishing descends, pose by pose and then along each segment (:func:`_swept`): the matrix grows
+# as P^2 (121 points: 126 MB, 8 ms a call with its gradient, against 0.3 ms)
+SWEEP_MATRIX_POINTS = 16
+
+
+def _swept(pose: torch.Tensor, footprint_points, n: int) -> torch.Tensor:
+    """Every DDA point (Eq. 9) of every footprint point (Eqs. 7-8) of poses (B, P, 4)
+    ([cos psi, sin psi, x, y]) -> (B, M, 2, R), M = (P-1) n + 1: the footprint placed at each
+    pose, then point k of segment p at (1 - k/n) of pose p's and k/n of pose p+1's (the last
+    row: the last pose's), the same as the sweep matrix of :func:`_sweep_matrix`."""
+    B, P, _ = pose.shape
+    footprint = _check_footprint(_as_footprint_tensor(footprint_points, pose))
+    placed = pose @ _placement_matrix(footprint)  # (B, P, 2R)
+    frac = torch.arange(n, dtype=pose.dtype, device=pose.device) / n  # (n,)
+    inner = placed[:, :-1, None] + frac[:, None] * (placed[:, 1:] - placed[:, :-1])[:, :, None]
+    xy = torch.cat([inner.reshape(B, (P - 1) * n, -1), placed[:, -1:]], dim=1)  # (B, M, 2R)
+    return xy.view(B, -1, 2, footprint.shape[0])
 
 
 _sweep_cache: OrderedDict[tuple, tuple[torch.Tensor, torch.Tensor]] = OrderedDict()

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import torch
 
-from ecahd_core.cost import (MODES, CostConfig, CostTerms, pose_headings, trajectory_cost,
-                             trajectory_cost_loops)
+from ecahd_core.cost import (MODES, SWEEP_MATRIX_POINTS, CostConfig, CostTerms, pose_headings,
+                             trajectory_cost, trajectory_cost_loops)
 from ecahd_core.costmap import CostMap
 from ecahd_core.errors import EcahdError, FootprintError, TrajectoryError
 from ecahd_core.footprint import make_footprint
@@ -41,10 +41,10 @@ def near_wall_trajectories(grid, B, P, seed, step=0.3, band=(0.1, 0.35)):
 
 
 # ----------------------------------------------------------------------------- gradients
-@pytest.mark.parametrize("mode", MODES)
-def test_gradient_matches_central_differences(maze, mode):
+@pytest.mark.parametrize("mode,P", [(m, 4) for m in MODES] + [("surface", SWEEP_MATRIX_POINTS + 2)])
+def test_gradient_matches_central_differences(maze, mode, P):
     grid, cm = maze
-    traj = near_wall_trajectories(grid, B=3, P=4, seed=1)
+    traj = near_wall_trajectories(grid, B=3, P=P, seed=1)
     goal = torch.tensor([6.0, 4.5], dtype=F64)
     fp = torch.tensor(make_footprint("quadruped").points, dtype=F64)  # asymmetric: heading matters
 
@@ -200,10 +200,11 @@ def test_zero_length_segments_are_finite(maze, dtype, mode):
 
 
 # -------------------------------------------------------------------------- loop reference
+@pytest.mark.parametrize("P", [4, SWEEP_MATRIX_POINTS + 9])  # the sweep matrix; pose by pose
 @pytest.mark.parametrize("mode", MODES)
-def test_loops_equal_batched(maze, mode):
+def test_loops_equal_batched(maze, mode, P):
     grid, cm = maze
-    traj = near_wall_trajectories(grid, B=2, P=4, seed=7, step=0.1, band=(0.03, 0.1))
+    traj = near_wall_trajectories(grid, B=2, P=P, seed=7, step=0.1, band=(0.03, 0.1))
     traj[1, 2] = traj[1, 1]  # include a zero-length segment
     goal = traj[:, -1].clone()
     fp = make_footprint("quadruped").points
