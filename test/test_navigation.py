@@ -807,3 +807,29 @@ def test_waypoints_the_robot_passed_while_the_plan_came_are_dropped():
     # past every interior waypoint: the goal stays
     r.set_pose((0.6, 0.35, 0.0), 0.0)
     assert r.passed_waypoints(plan[:3]) == 1 and r.passed_waypoints(plan[:2]) == 0
+
+
+def test_a_re_plan_asked_for_where_the_goals_last_plans_started_is_stalled():
+    """The runner marks a re-plan stalled (rules.stalled) when the goal's last STALL_PLANS plans,
+    itself included, were asked for within STALL_RADIUS of where it is: the robot turning in
+    loops; plans that move on, or a new goal, are not."""
+    from ecahd_core.planning.rules import STALL_PLANS, STALL_RADIUS, stalled
+
+    assert not stalled(np.zeros((STALL_PLANS - 1, 2)))
+    assert stalled(np.zeros((STALL_PLANS, 2)))
+    spread = np.zeros((STALL_PLANS, 2))
+    spread[0] = [STALL_RADIUS + 0.05, 0.0]
+    assert not stalled(spread) and stalled(np.concatenate([spread, np.zeros((STALL_PLANS, 2))]))
+    r = GlobalRunner(GlobalRunnerConfig(replan_timeout=2.0))
+    r.set_goal((2.0, 1.0))
+    seen, t = [], 0.0
+    for xy in [(0.0, 0.0), (0.3, 0.0), (0.2, 0.3), (0.1, 0.1), (2.5, 0.0)]:
+        req = r.step(xy, t)
+        while not isinstance(req, PlanRequest):  # wait out the timeout where the robot is
+            t = round(t + 0.1, 1)
+            req = r.step(xy, t)
+        seen.append(req.stalled)
+        r.accept(PLAN, t)
+    assert seen == [False, False, True, True, False]
+    r.set_goal((2.0, 1.0))  # a new goal starts afresh
+    assert not r.step((0.1, 0.1), t + 1.0).stalled

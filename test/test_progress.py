@@ -214,3 +214,22 @@ def test_route_sight_lets_a_robot_standing_in_a_tight_door_see_along_the_route_t
     sight = route_sight(placer, room, route)
     free = placer.wall_length(room, route) == 0
     assert np.array_equal(sight, free) and free[0] and not free[-1]
+
+
+def test_a_stalled_re_plan_gets_the_subgoal_rule_whatever_its_iteration():
+    """SparseStage.step applies the subgoal rule to a stalled re-plan (the caller's
+    rules.stalled) at any iteration; not stalled, within Algorithm 1's P^g - 1 iterations and
+    with a goal not round the walls, it does not (the rule's apply spied on)."""
+    hd = maze_planner(replan_spacing=3.0)
+    stage, grid = hd.stage, builtin_map("maze2d-large")
+    rule = stage.subgoal_rule()
+    applied = []
+    rule.apply = lambda sd, S, G, sparse, iteration, **kw: applied.append(iteration) or sparse
+    stage._roundabout = lambda *a: False
+    free = grid.cell_to_world(*np.argwhere(~grid.occupied)[[0, -1]].T)
+    S, G = free[0], free[1]
+    for stalled, want in ((False, []), (True, [0])):
+        applied.clear()
+        stage.step(S, G, iteration=0, generator=torch.Generator().manual_seed(0),
+                   stalled=stalled)
+        assert applied == want

@@ -27,7 +27,7 @@ from ecahd_core.errors import EcahdError, PlanningError
 from ecahd_core.placement import LEG_ROUNDS
 from ecahd_core.planning.horizon import (REPLAN_POLICIES, SNAP_DISTANCE, check_replan_spacing,
                                          replan_horizon, replan_spacing_for)
-from ecahd_core.planning.rules import SparseStage
+from ecahd_core.planning.rules import STALL_PLANS, SparseStage, stalled
 
 MAX_STALL_DOUBLINGS = 3  # GlobalRunnerConfig.replan_timeout grows at most 8-fold
 # [m] coming this much nearer the next waypoint than ever since it became the next one is
@@ -85,6 +85,7 @@ class PlanRequest:
     horizon: int
     reason: str
     iteration: int = 0
+    stalled: bool = False  # the goal's last plans all started near here (rules.stalled)
 
 
 class GlobalRunner:
@@ -111,6 +112,7 @@ class GlobalRunner:
         self._last_progress = -math.inf  # [s] of the last progress (PROGRESS_STEP)
         self._closest = math.inf  # [m] nearest the robot came to the next waypoint
         self.stalls = 0  # timeout replans since a waypoint was last reached
+        self._starts: list = []  # (2,) [m] where the goal's last plans were asked for
         self.stall_timeout = config.replan_timeout  # [s] the last timeout replan's wait
 
     @property
@@ -133,6 +135,7 @@ class GlobalRunner:
         if not np.all(np.isfinite(g)):
             raise PlanningError(f"goal is not finite: {g.tolist()}")
         self.goal, self.waypoints, self.iteration, self._pending = g, None, 0, True
+        self._starts = []
         self._forced, self.blocked_count, self._hold, self.stalls = None, 0, False, 0
         self._follow_to = 1
 
@@ -162,6 +165,7 @@ class GlobalRunner:
             if now - self._last_request < c.min_plan_interval:
                 return None  # coalesce a burst of goals: the latest is planned next time
             self._last_request = now
+            self._starts = [xy.copy()]
             return PlanRequest(xy, self.goal.copy(), c.horizon, "goal")
         if self.waypoints is None:
             return None
@@ -194,7 +198,9 @@ class GlobalRunner:
 
     def _request(self, xy: np.ndarray, reason: str) -> PlanRequest:
         """A re-plan from ``xy`` (2,) [m] now, for ``reason``."""
-        return PlanRequest(xy, self.goal.copy(), self._horizon(xy), reason, self.iteration)
+        self._starts = self._starts[-(STALL_PLANS - 1):] + [xy.copy()]
+        return PlanRequest(xy, self.goal.copy(), self._horizon(xy), reason, self.iteration,
+                           stalled=stalled(self._starts))
 
     def _horizon(self, xy: np.ndarray) -> int:
         """The horizon of a re-plan from ``xy`` (2,) [m] now (:func:`replan_horizon`)."""
@@ -480,12 +486,15 @@ class OnlinePlanner:
         # (warm_fraction; from noise when 0, bit for bit)
         previous = self.runner.waypoints if request.reason == "waypoint" else None
         step = stage.step(start, goal, previous, iteration=request.iteration,
-                          horizon=request.horizon, sd=sd, generator=self.generator)
+                          horizon=request.horizon, sd=sd, generator=self.generator,
+                          stalled=request.stalled)
         waypoints = step.waypoints.copy()
         waypoints[0], waypoints[-1] = start, goal  # exact ends (the model works in float32)
-        detail = (" (toward a subgoal on the shortest route)" if step.sparse.first_leg ==
-                  "subgoal" else f" (candidate {step.sparse.best} of "
-                                 f"{len(step.sparse.candidates)})")
+        detail = (" (toward a subgoal on the shortest route"
+                  + (", stalled: the goal's last plans started within a metre)"
+                     if request.stalled else ")")
+                  if step.sparse.first_leg == "subgoal"
+                  else f" (candidate {step.sparse.best} of {len(step.sparse.candidates)})")
         if step.sparse.placed:
             detail += f", {step.sparse.placed} waypoint(s) moved out of or added round walls"
         if not self.placement_on and len(waypoints) > 2:

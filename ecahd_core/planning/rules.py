@@ -15,7 +15,8 @@ The rules (ours, beyond the paper), each with its one gate here:
   crosses a wall is drawn again from noise under the rule (``first_leg`` "cold" when that
   draw's first leg was free as selected).
 - **subgoal** (:meth:`SparseStage.subgoaling`; :class:`~ecahd_core.progress.SubgoalRule`): a
-  re-plan beyond Algorithm 1's P^g - 1 iterations whose first leg makes no progress by the
+  re-plan beyond Algorithm 1's P^g - 1 iterations, or a stalled one (:func:`stalled`: the
+  goal's last plans all started within a metre), whose first leg makes no progress by the
   goal's cost-to-go plans toward a point on the shortest route.
 - **settle** (:meth:`SparseStage.settling`): a plan whose every straight leg is free by the
   placer's leg test is followed whole (no re-plan at its waypoints); a plan toward a subgoal
@@ -36,6 +37,25 @@ from ecahd_core.errors import EcahdError
 from ecahd_core.planning.horizon import (MAX_EXTRA_ITERATIONS, REPLAN_POLICIES,
                                          check_replan_spacing, replan_horizon)
 from ecahd_core.planning.sparse import SparseDiffusion, SparsePlan
+
+
+# a re-plan is stalled when the goal's last STALL_PLANS plans, itself included, all started
+# within STALL_RADIUS of where it starts: the robot is turning in loops where it is (the office
+# closed loop of 2026-12-07: SD's re-plans aimed through the wall beside the door the robot stood
+# in, 9 plans in 30 s within a metre, until a blocked segment's A* fallback took it through)
+STALL_PLANS = 3
+STALL_RADIUS = 1.0  # [m]
+
+
+def stalled(starts) -> bool:
+    """Whether a re-plan is stalled: ``starts`` (K, 2) [m] are where the goal's plans started,
+    oldest first, the last being the re-plan's own; at least STALL_PLANS, the last STALL_PLANS
+    all within STALL_RADIUS of the last."""
+    s = np.asarray(starts, dtype=np.float64).reshape(-1, 2)
+    if len(s) < STALL_PLANS:
+        return False
+    s = s[-STALL_PLANS:]
+    return bool((np.linalg.norm(s - s[-1], axis=1) <= STALL_RADIUS).all())
 
 
 @dataclass(frozen=True)
@@ -157,7 +177,8 @@ class SparseStage:
 
     def step(self, start, goal, previous=None, *, iteration: int = 0,
              horizon: int | None = None, sd: SparseDiffusion | None = None, generator=None,
-             settle: bool = True, times: dict | None = None) -> GlobalStep:
+             settle: bool = True, times: dict | None = None, stalled: bool = False
+             ) -> GlobalStep:
         """Iteration ``iteration`` (p, waypoints reached since the goal's first plan) of
         Algorithm 1 from ``start`` (2,) [m] to ``goal`` (2,) [m].
 
@@ -169,6 +190,8 @@ class SparseStage:
             generator: SD's random numbers.
             settle: False turns the settle rule off for this call (backtracking re-plans).
             times: the subgoal rule's cost-to-go time is added to ``times["goal_field"]`` [ms].
+            stalled: the caller's :func:`stalled` verdict on this re-plan: the subgoal rule acts
+                whatever the iteration.
 
         Returns:
             GlobalStep.
@@ -194,7 +217,7 @@ class SparseStage:
             sparse = replace(sparse, first_leg=sparse.first_leg or "cold")
         if (self.every_waypoint and not forced and self.subgoaling(sd)
                 and (iteration >= sd.config.horizon - 1  # beyond where Algorithm 1 reaches G
-                     or self._roundabout(sd, S, G, times))):
+                     or stalled or self._roundabout(sd, S, G, times))):
             sparse = self.subgoal_rule().apply(sd, S, G, sparse, iteration,
                                                generator=generator, times=times)
         wp = sparse.waypoints if self.lanes is None else self.lanes(sparse.waypoints)
