@@ -14,7 +14,7 @@ import torch
 from ecahd_core.errors import EcahdError
 from ecahd_core.placement import BACKTRACKS
 from ecahd_core.planning.dense import DenseConfig, DenseStage, LocalStages
-from ecahd_core.planning.rules import SparseStage, stalled
+from ecahd_core.planning.rules import SparseStage
 from ecahd_core.planning.sparse import SparseDiffusion, SparsePlan, rank_candidates
 
 # iterations a backtracking round (HierarchicalPlanner's ``backtracks``) may try: each tries its
@@ -307,11 +307,9 @@ class HierarchicalPlanner(DenseStage):
         # SD calls after it start from where SD put it).
         while True:
             t0 = time.perf_counter()
-            starts = [w[0] for w, sp in zip(global_plans, sparse_plans) if sp is not None]
             step = self.stage.step(S.numpy(), G.numpy(),
                                    global_plans[-1] if global_plans else None, iteration=p,
-                                   generator=generator, settle=settle, times=times,
-                                   stalled=stalled(starts + [S.numpy()]))
+                                   generator=generator, settle=settle, times=times)
             sparse, waypoints, legs = step.sparse, step.waypoints, step.follow
             times["sd"] += (time.perf_counter() - t0) * 1e3
             global_plans += [waypoints[q:] for q in range(legs)]

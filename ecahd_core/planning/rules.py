@@ -15,9 +15,9 @@ The rules (ours, beyond the paper), each with its one gate here:
   crosses a wall is drawn again from noise under the rule (``first_leg`` "cold" when that
   draw's first leg was free as selected).
 - **subgoal** (:meth:`SparseStage.subgoaling`; :class:`~ecahd_core.progress.SubgoalRule`): a
-  re-plan beyond Algorithm 1's P^g - 1 iterations, or a stalled one (:func:`stalled`: the
-  goal's last plans all started within a metre), whose first leg makes no progress by the
-  goal's cost-to-go plans toward a point on the shortest route.
+  re-plan beyond Algorithm 1's P^g - 1 iterations, or (online) a stalled one (:func:`stalled`:
+  the robot asked for the goal's last plans within a metre), whose first leg makes no progress
+  by the goal's cost-to-go plans toward a point on the shortest route.
 - **settle** (:meth:`SparseStage.settling`): a plan whose every straight leg is free by the
   placer's leg test is followed whole (no re-plan at its waypoints); a plan toward a subgoal
   whose legs up to it are free is followed to the subgoal.
@@ -42,7 +42,10 @@ from ecahd_core.planning.sparse import SparseDiffusion, SparsePlan
 # a re-plan is stalled when the goal's last STALL_PLANS plans, itself included, all started
 # within STALL_RADIUS of where it starts: the robot is turning in loops where it is (the office
 # closed loop of 2026-12-07: SD's re-plans aimed through the wall beside the door the robot stood
-# in, 9 plans in 30 s within a metre, until a blocked segment's A* fallback took it through)
+# in, 9 plans in 26 s within about a metre, until a blocked segment's A* fallback took it
+# through). The online runner judges it (the robot's progress); the offline loop, whose agent
+# jumps to each waypoint, does not: there it changed 20 of 432 office plans and 14 of 648 on
+# maps never used in development, one of them lost (docs/rules.md)
 STALL_PLANS = 3
 STALL_RADIUS = 1.0  # [m]
 
@@ -190,8 +193,8 @@ class SparseStage:
             generator: SD's random numbers.
             settle: False turns the settle rule off for this call (backtracking re-plans).
             times: the subgoal rule's cost-to-go time is added to ``times["goal_field"]`` [ms].
-            stalled: the caller's :func:`stalled` verdict on this re-plan: the subgoal rule acts
-                whatever the iteration.
+            stalled: the online caller's :func:`stalled` verdict on this re-plan: the subgoal
+                rule acts whatever the iteration.
 
         Returns:
             GlobalStep.
