@@ -67,10 +67,12 @@ PARAMETERS = [
                                       "model's expert waypoint spacing, at least 3.0, else "
                                       "off; 0 = off"),
     ParamSpec("subgoals", _ONLINE.subgoals, "sd, every_waypoint, with a replan spacing and the free-first-"
-                                "leg rule on (building maps): a re-plan past P^g - 1 waypoints "
+                                "leg rule on (building maps): a re-plan past P^g - 1 waypoints, "
+                                "or one the robot asks for within 1 m of where it asked for the "
+                                "goal's last two (stalled, ecahd_core.planning.rules.stalled), "
                                 "whose first leg makes no progress by the goal's cost-to-go "
                                 "plans toward a point on the shortest route (the subgoal rule, "
-                                "ecahd_core.progress.SubgoalRule)"),
+                                "ecahd_core.progress.SubgoalRule; docs/rules.md, subgoals)"),
     ParamSpec("settle", _ONLINE.settle, "sd, every_waypoint, with a replan spacing and the free-first-leg "
                               "rule on (building maps): a plan whose every straight leg is free "
                               "by the leg test is followed whole, not re-planned at each "
