@@ -202,7 +202,8 @@ def trajectory_cost(traj: torch.Tensor, goal, footprint_points, costmap: CostMap
         xy, pair_dim = traj.transpose(1, 2) @ dda.T, 1  # (B, 2, M)
     else:
         # The footprint at a pose (Eqs. 7-8) is linear in [cos psi, sin psi, x, y] and the DDA
-        # points (Eq. 9) are linear in the poses, so both are one (P*4, M*2*R) matrix.
+        # points (Eq. 9) are linear in the poses, so both are one (P*4, M*2*R) matrix; for long
+        # trajectories (SWEEP_MATRIX_POINTS) the same map is applied pose by pose.
         psi = pose_headings(traj)  # (B, P) Eq. 4
         pose = torch.cat([torch.stack([torch.cos(psi), torch.sin(psi)], -1), traj], -1)  # (B, P, 4)
         if P <= SWEEP_MATRIX_POINTS:
